@@ -1,0 +1,128 @@
+#pragma once
+/// @file
+/// The tracking controller: inverse compensator, PID, disturbance observer,
+/// reference feedforward and output stage, in the paper's structure (Fig. 4).
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string_view>
+
+#include "control/disturbance_observer.hpp"
+#include "control/hammerstein_model.hpp"
+#include "control/inverse_correction.hpp"
+#include "control/output_stage.hpp"
+#include "control/pid.hpp"
+#include "control/pid_tuning.hpp"
+#include "control/polynomial_inverse.hpp"
+#include "control/reference_feedforward.hpp"
+
+namespace pvcgel::control {
+
+/// The paper's three controllers and one beyond it.
+enum class ControllerMode : std::uint8_t {
+  pid,                 ///< PID on the voltage directly
+  inverse_pid,         ///< PID through the inverse compensator f^-1
+  inverse_pid_dob,     ///< ... plus the disturbance observer
+  inverse_pid_dob_ff,  ///< ... plus reference feedforward through G^-1 and a learned inverse correction
+};
+inline constexpr std::array<ControllerMode, 4> kAllModes{ControllerMode::pid, ControllerMode::inverse_pid,
+                                                         ControllerMode::inverse_pid_dob,
+                                                         ControllerMode::inverse_pid_dob_ff};
+/// "pid", "inverse_pid", ...
+std::string_view to_string(ControllerMode m) noexcept;
+/// Inverse of to_string.
+std::optional<ControllerMode> parse_mode(std::string_view name) noexcept;
+
+/// Everything the controller needs besides the model. Checked by the constructor.
+struct ControllerConfig {
+  double sample_time_s = 1e-3;
+  int io_delay_samples = 1;  ///< I/O delay of the rig beyond the zero-order hold
+  ControllerMode mode = ControllerMode::inverse_pid_dob;
+  double voltage_min_V = 0.0;
+  double voltage_max_V = 1000.0;
+  double slew_limit_V_per_s = 0.0;  ///< 0: off
+  double dob_lambda_s = 0.1;
+  int dob_q_order = 1;
+  double learning_memory_s = 4.0;  ///< forgetting time of the inverse correction (ff mode)
+  /// When set, every mode's PID is tuned to this target on the plant that mode sees;
+  /// otherwise `gains` are used as given.
+  std::optional<TuningTarget> tuning = TuningTarget{};
+  std::array<PidGains, 4> gains{};  ///< indexed by ControllerMode
+  double operating_point_um = 100.0;  ///< where mode pid's plant is linearised for tuning
+  /// Small-signal gain of the real plant relative to the model, per mode, as a
+  /// frequency-response measurement on the rig shows it (1: trust the model).
+  /// Tuning on what the loop really sees is what makes modes comparable.
+  std::array<double, 4> tuning_gain_scale{1.0, 1.0, 1.0, 1.0};
+  double antiwindup_tracking_time_s = 0.0;  ///< 0: automatic
+};
+
+/// Result of one controller step.
+struct ControlOutput {
+  enum class Status : std::uint8_t { ok, saturated, invalid_input };
+  double voltage_V = 0.0;      ///< to the amplifier (clamped, slew-limited)
+  double unclamped_V = 0.0;    ///< what the control law asked for
+  double v_command = 0.0;      ///< linear-block input requested (inverse modes)
+  double d_hat = 0.0;          ///< disturbance estimate (linear-block input units)
+  double v_ff = 0.0;           ///< feedforward term
+  double error_um = 0.0;       ///< r - y
+  Status status = Status::ok;
+};
+
+/// One controller instance, any of the four modes, switchable bumplessly.
+/// Construction validates and designs everything (may throw ConfigError);
+/// `step()` is real-time safe: no allocation, no exceptions, no locks, no I/O.
+class Controller final {
+ public:
+  Controller(const HammersteinModel& model, const ControllerConfig& config);
+
+  /// One sample: reference preview (r[k], r[k+1], ...; the last value is held
+  /// if fewer than preview_samples()+1 are given) and measurement y[k].
+  ControlOutput step(std::span<const double> reference_preview_um, double y_um) noexcept;
+  /// Switch mode; takes effect at the next step without a jump in the output.
+  void set_mode(ControllerMode mode) noexcept { pending_mode_ = mode; }
+  /// Current mode.
+  [[nodiscard]] ControllerMode mode() const noexcept { return mode_; }
+  /// Put every state at the nominal steady state for a constant reference r0.
+  void reset_steady_state(double r0_um) noexcept;
+  /// Voltage applied in the last step (or set by reset_steady_state).
+  [[nodiscard]] double last_voltage_V() const noexcept { return output_.last_V(); }
+  /// Reference samples beyond r[k] the feedforward uses.
+  [[nodiscard]] int preview_samples() const noexcept { return ff_.preview_samples(); }
+  /// Gains in use for a mode.
+  [[nodiscard]] const PidGains& gains(ControllerMode m) const noexcept {
+    return gains_[static_cast<size_t>(m)];
+  }
+  /// Margins on the design plant for a mode.
+  [[nodiscard]] const LoopMargins& margins(ControllerMode m) const noexcept {
+    return margins_[static_cast<size_t>(m)];
+  }
+  /// Linear plant each mode's PID sees (for tuning and stability checks).
+  [[nodiscard]] DiscreteTransferFunction design_plant(ControllerMode m) const;
+  /// The learned inverse correction (ff mode).
+  [[nodiscard]] const InverseCorrection& inverse_correction() const noexcept { return correction_; }
+  [[nodiscard]] const ControllerConfig& config() const noexcept { return cfg_; }
+  [[nodiscard]] const DiscretePlantModel& plant_model() const noexcept { return plant_; }
+
+ private:
+  [[nodiscard]] double linear_input_for(double voltage_V, ControllerMode m) const noexcept;
+  [[nodiscard]] double voltage_for(double v, ControllerMode m) const noexcept;
+
+  ControllerConfig cfg_;
+  HammersteinModel model_;
+  DiscretePlantModel plant_;
+  PolynomialInverse inverse_;
+  DisturbanceObserver dob_;
+  ReferenceFeedforward ff_;
+  InverseCorrection correction_;
+  OutputStage output_;
+  Pid pid_;
+  std::array<PidGains, 4> gains_{};
+  std::array<LoopMargins, 4> margins_{};
+  double pid_plant_gain_ = 1.0;  // f'(x) at the operating point
+  ControllerMode mode_;
+  ControllerMode pending_mode_;
+};
+
+}  // namespace pvcgel::control

@@ -1,0 +1,24 @@
+// `pvcgel`: the command-line tool for PVC gel actuator rigs.
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "control/config_error.hpp"
+#include "tools/bench_command.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"pvcgel: identification, diagnosis, benchmarks and rig control for PVC gel actuators"};
+  app.require_subcommand(1);
+  pvcgel::tools::add_bench_command(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const pvcgel::control::ConfigError& e) {
+    std::cerr << "pvcgel: configuration error: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "pvcgel: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

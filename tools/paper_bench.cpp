@@ -1,0 +1,123 @@
+#include "tools/paper_bench.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <sstream>
+
+namespace pvcgel::tools {
+
+using control::ControllerMode;
+
+PaperBenchResult run_paper_bench(const PaperBenchOptions& o) {
+  PaperBenchResult result;
+  double noise_sum = 0.0;
+  long runs = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (const auto& name : control::kPaperReferenceNames) {
+    const auto ref = *control::paper_reference(name);
+    ReferenceResult rr{name, {}};
+    for (auto m : control::kAllModes) {
+      control::ControllerConfig cc;
+      cc.sample_time_s = o.rig.sample_time_s;
+      cc.io_delay_samples = o.rig.io_delay_samples;
+      cc.tuning = o.tuning;
+      cc.mode = m;
+      control::Controller ctl(o.model, cc);
+      control::SimulatedRig rig(o.rig);
+      auto run = control::run_closed_loop(rig, ctl, ref, o.duration_s, o.settle_s, o.keep_traces);
+      auto& mr = rr.modes[static_cast<size_t>(m)];
+      mr = {m, run.errors, ctl.gains(m), ctl.margins(m), std::move(run.trace)};
+      noise_sum += run.errors.noise_mean_abs_um;
+      ++runs;
+    }
+    result.references.push_back(std::move(rr));
+  }
+  const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.steps_per_second = runs * o.duration_s / o.rig.sample_time_s / dt;
+  result.noise_floor_um = noise_sum / static_cast<double>(runs);
+  return result;
+}
+
+bool paper_ranking_holds(const ReferenceResult& r) {
+  const auto mean = [&](ControllerMode m) { return r.modes[static_cast<size_t>(m)].errors.mean_abs_um; };
+  return mean(ControllerMode::inverse_pid_dob) < mean(ControllerMode::inverse_pid) &&
+         mean(ControllerMode::inverse_pid) < mean(ControllerMode::pid);
+}
+
+std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) {
+  std::ostringstream os;
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "Paper rig (truth n=3, model n=2), every mode's PID tuned to crossover %.0f rad/s, phase "
+                "margin %.0f deg on the plant it sees;\nerrors |r - y_measured| over %.0f..%.0f s. "
+                "Sensor-noise floor (mean |noise|): %.3f um.\n\n",
+                o.tuning.crossover_rad_s, o.tuning.phase_margin_deg, o.settle_s, o.duration_s, r.noise_floor_um);
+  os << buf;
+  os << "                     |        PID        |    inverse/PID    |  inverse/PID/DOB  | inv/PID/DOB/FF (ours)\n";
+  os << "reference            |   ours    paper   |   ours    paper   |   ours    paper   |   ours   vs PID\n";
+  os << "---------------------+-------------------+-------------------+-------------------+------------------\n";
+  for (size_t i = 0; i < r.references.size(); ++i) {
+    const auto& rr = r.references[i];
+    const auto& paper = kPaperTableIII[i];
+    for (int stat = 0; stat < 2; ++stat) {
+      auto val = [&](size_t m) {
+        const auto& e = rr.modes[m].errors;
+        return stat == 0 ? e.mean_abs_um : e.max_abs_um;
+      };
+      const auto& pp = stat == 0 ? paper.mean_um : paper.max_um;
+      std::snprintf(buf, sizeof buf, "%-6s (%s)         | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f  %+5.0f%%\n",
+                    rr.name.c_str(), stat == 0 ? "mean" : "max ", val(0), pp[0], val(1), pp[1], val(2), pp[2],
+                    val(3), 100.0 * (val(3) / val(0) - 1.0));
+      os << buf;
+    }
+  }
+  os << "\nReduction of mean |e| versus PID (ours / paper):\n";
+  for (size_t i = 0; i < r.references.size(); ++i) {
+    const auto& rr = r.references[i];
+    const auto& paper = kPaperTableIII[i];
+    auto red = [](double x, double ref) { return 100.0 * (1.0 - x / ref); };
+    const double pid = rr.modes[0].errors.mean_abs_um;
+    std::snprintf(buf, sizeof buf,
+                  "  %-6s inverse/PID %5.1f%% / %5.1f%%   inverse/PID/DOB %5.1f%% / %5.1f%%   "
+                  "inv/PID/DOB/FF %5.1f%%   ranking DOB < inverse < PID: %s   FF within 2x noise floor: %s\n",
+                  rr.name.c_str(), red(rr.modes[1].errors.mean_abs_um, pid), red(paper.mean_um[1], paper.mean_um[0]),
+                  red(rr.modes[2].errors.mean_abs_um, pid), red(paper.mean_um[2], paper.mean_um[0]),
+                  red(rr.modes[3].errors.mean_abs_um, pid), paper_ranking_holds(rr) ? "yes" : "NO",
+                  rr.modes[3].errors.mean_abs_um <= 2.0 * r.noise_floor_um ? "yes" : "NO");
+    os << buf;
+  }
+  os << "\nError without sensor noise, mean |r - y_true| (um):\n";
+  for (const auto& rr : r.references) {
+    std::snprintf(buf, sizeof buf, "  %-6s pid %.3f  inverse_pid %.3f  inverse_pid_dob %.3f  inverse_pid_dob_ff %.3f\n",
+                  rr.name.c_str(), rr.modes[0].errors.mean_abs_true_um, rr.modes[1].errors.mean_abs_true_um,
+                  rr.modes[2].errors.mean_abs_true_um, rr.modes[3].errors.mean_abs_true_um);
+    os << buf;
+  }
+  return os.str();
+}
+
+std::string to_json(const PaperBenchResult& r, const PaperBenchOptions& o) {
+  std::ostringstream os;
+  os.precision(6);
+  os << "{\n  \"noise_floor_um\": " << r.noise_floor_um << ",\n";
+  os << "  \"tuning\": {\"crossover_rad_s\": " << o.tuning.crossover_rad_s
+     << ", \"phase_margin_deg\": " << o.tuning.phase_margin_deg << "},\n";
+  os << "  \"steps_per_second\": " << r.steps_per_second << ",\n  \"references\": [\n";
+  for (size_t i = 0; i < r.references.size(); ++i) {
+    const auto& rr = r.references[i];
+    os << "    {\"name\": \"" << rr.name << "\", \"paper_ranking_holds\": "
+       << (paper_ranking_holds(rr) ? "true" : "false") << ", \"modes\": {";
+    for (size_t m = 0; m < 4; ++m) {
+      const auto& mr = rr.modes[m];
+      os << (m ? ", " : "") << "\"" << control::to_string(mr.mode) << "\": {\"mean_um\": " << mr.errors.mean_abs_um
+         << ", \"max_um\": " << mr.errors.max_abs_um << ", \"rms_um\": " << mr.errors.rms_um
+         << ", \"mean_true_um\": " << mr.errors.mean_abs_true_um << ", \"kp\": " << mr.gains.kp
+         << ", \"ki\": " << mr.gains.ki << ", \"kd\": " << mr.gains.kd << "}";
+    }
+    os << "}}" << (i + 1 < r.references.size() ? "," : "") << "\n";
+  }
+  os << "  ]\n}\n";
+  return os.str();
+}
+
+}  // namespace pvcgel::tools
