@@ -6,6 +6,11 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <sstream>
+
+#include <toml++/toml.h>
+
+#include "control/config_parser.hpp"
 
 #include "tools/gnuplot.hpp"
 #include "tools/paper_bench.hpp"
@@ -19,8 +24,8 @@ namespace {
 struct PaperArgs {
   double crossover = 45.0, phase_margin = 60.0, duration = 60.0, settle = 20.0;
   std::uint64_t seed = 1;
-  std::string json, plot_dir;
-  bool sweep = false;
+  std::string json, plot_dir, config;
+  bool sweep = false, crossover_given = false, seed_given = false, phase_margin_given = false;
   std::vector<double> sweep_values{15, 20, 30, 45, 60, 80, 120, 160, 250};
 };
 
@@ -70,11 +75,26 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
 
 int run_paper(const PaperArgs& a) {
   PaperBenchOptions o;
-  o.tuning.crossover_rad_s = a.crossover;
-  o.tuning.phase_margin_deg = a.phase_margin;
+  if (!a.config.empty()) {
+    toml::table root;
+    try {
+      root = toml::parse_file(a.config);
+    } catch (const toml::parse_error& e) {
+      std::ostringstream os;
+      os << a.config << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
+      throw std::runtime_error(os.str());
+    }
+    const auto cfg = control::parse_configuration(root, a.config);
+    o.model = cfg.model;
+    o.rig = cfg.sim;
+    o.controller = cfg.controller;
+    if (cfg.controller.tuning) o.tuning = *cfg.controller.tuning;
+  }
+  if (a.crossover_given) o.tuning.crossover_rad_s = a.crossover;
+  if (a.phase_margin_given) o.tuning.phase_margin_deg = a.phase_margin;
   o.duration_s = a.duration;
   o.settle_s = a.settle;
-  o.rig.seed = a.seed;
+  if (a.seed_given || a.config.empty()) o.rig.seed = a.seed;
   if (!(a.settle >= 0.0 && a.duration > a.settle + 1.0))
     throw std::runtime_error("--duration must exceed --settle by at least 1 s");
   o.keep_traces = !a.plot_dir.empty();
@@ -165,12 +185,17 @@ void add_bench_command(CLI::App& app) {
       ->capture_default_str()->check(CLI::Range(1.0, 89.0));
   paper->add_option("--duration", args->duration, "simulated seconds per run")->capture_default_str()->check(CLI::PositiveNumber);
   paper->add_option("--settle", args->settle, "start-up transient excluded from the errors (s)")->capture_default_str();
+  paper->add_option("--config", args->config, "TOML file with [model], [controller] and [sim] tables (default: the paper rig)")
+      ->check(CLI::ExistingFile);
   paper->add_option("--seed", args->seed, "sensor-noise seed")->capture_default_str();
   paper->add_option("--json", args->json, "write results as JSON to FILE");
   paper->add_option("--plot", args->plot_dir, "write PNG plots (like the paper's Figs. 11-13) to DIR");
   paper->add_flag("--sweep", args->sweep, "sweep the crossover target instead (plots go to --plot DIR)");
   paper->add_option("--sweep-values", args->sweep_values, "crossover values for --sweep (rad/s)");
-  paper->callback([args] {
+  paper->callback([args, paper] {
+    args->crossover_given = paper->count("--crossover") > 0;
+    args->phase_margin_given = paper->count("--phase-margin") > 0;
+    args->seed_given = paper->count("--seed") > 0;
     const int rc = run_paper(*args);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });

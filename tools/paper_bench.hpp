@@ -26,6 +26,8 @@ inline constexpr std::array<PaperRow, 4> kPaperTableIII{{
 /// How the comparison is run.
 struct PaperBenchOptions {
   control::TuningTarget tuning{45.0, 60.0};  ///< same target for every mode
+  /// Base controller settings (mode and tuning are set per run from the above).
+  control::ControllerConfig controller{};
   double duration_s = 60.0;
   double settle_s = 20.0;  ///< errors are evaluated after this
   control::SimRigConfig rig{};

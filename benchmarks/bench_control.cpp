@@ -1,0 +1,62 @@
+// Speed targets of the foundation issue, printed with their ratio to the target:
+//  - controller step (inverse + PID + DOB + feedforward + clamp): median <= 1 us
+//  - closed-loop simulation (rig + controller): >= 1,000,000 steps/s on one core
+// Run: ./build/benchmarks/bench_control --benchmark_repetitions=5
+#include <benchmark/benchmark.h>
+
+#include <array>
+
+#include "control/closed_loop.hpp"
+
+using namespace pvcgel::control;
+
+namespace {
+
+constexpr double kStepTargetNs = 1000.0;
+constexpr double kSimTargetStepsPerSecond = 1e6;
+
+void BM_ControllerStep(benchmark::State& state) {
+  const auto mode = kAllModes[static_cast<size_t>(state.range(0))];
+  ControllerConfig cfg;
+  cfg.mode = mode;
+  Controller ctl(paper_model(2), cfg);
+  const auto ref = *paper_reference("1Hz");
+  std::array<double, 4> preview{};
+  long k = 0;
+  double y = 100.0;
+  for (auto _ : state) {
+    for (size_t i = 0; i < preview.size(); ++i) preview[i] = ref((k + static_cast<long>(i)) * 1e-3);
+    const auto out = ctl.step(preview, y);
+    y = 0.999 * y + 0.001 * preview[0];
+    benchmark::DoNotOptimize(out);
+    ++k;
+  }
+  state.SetLabel(std::string(to_string(mode)));
+  // Reported per iteration: ratio of the time to the 1 us target (below 1 meets it).
+  state.counters["target_ratio"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * kStepTargetNs * 1e-9,
+                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_ControllerStep)->DenseRange(0, 3)->Unit(benchmark::kNanosecond);
+
+void BM_ClosedLoopSimulation(benchmark::State& state) {
+  ControllerConfig cfg;
+  cfg.mode = ControllerMode::inverse_pid_dob_ff;
+  Controller ctl(paper_model(2), cfg);
+  SimulatedRig rig(SimRigConfig{});
+  const auto ref = *paper_reference("multi");
+  constexpr double kSeconds = 10.0;
+  for (auto _ : state) {
+    auto run = run_closed_loop(rig, ctl, ref, kSeconds, 1.0, false);
+    benchmark::DoNotOptimize(run.errors.mean_abs_um);
+  }
+  const double steps = static_cast<double>(state.iterations()) * kSeconds / cfg.sample_time_s;
+  state.counters["steps_per_s"] = benchmark::Counter(steps, benchmark::Counter::kIsRate);
+  // Ratio to the 1e6 steps/s target (above 1 meets it).
+  state.counters["target_ratio"] = benchmark::Counter(steps / kSimTargetStepsPerSecond, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_ClosedLoopSimulation)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
