@@ -39,6 +39,7 @@ void write_file(const fs::path& p, const std::string& s) {
 void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, const fs::path& dir) {
   fs::create_directories(dir);
   const char* titles[] = {"PID", "inverse/PID", "inverse/PID/DOB", "inverse/PID/DOB/FF"};
+  const char* colors[] = {"#d62728", "#1f77b4", "#2ca02c", "#ff7f0e"};
   for (const auto& rr : r.references) {
     const auto ref = *control::paper_reference(rr.name);
     // Like the paper's Figs. 11-13: a few periods at the end of the run.
@@ -61,10 +62,11 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
     gp += "set ylabel 'displacement (um)'\nset key outside right\nplot '" + dat.string() +
           "' u 1:2 w l lw 2 lc rgb 'black' t 'reference'";
     for (int m = 0; m < 4; ++m)
-      gp += ", '' u 1:" + std::to_string(3 + m) + " w l t '" + titles[m] + "'";
+      gp += ", '' u 1:" + std::to_string(3 + m) + " w l lc rgb '" + colors[m] + "' t '" + titles[m] + "'";
     gp += "\nset ylabel 'tracking error r - y (um)'\nplot ";
     for (int m = 0; m < 4; ++m)
-      gp += std::string(m ? ", " : "") + "'" + dat.string() + "' u 1:" + std::to_string(7 + m) + " w l t '" + titles[m] + "'";
+      gp += std::string(m ? ", " : "") + "'" + dat.string() + "' u 1:" + std::to_string(7 + m) + " w l lc rgb '" +
+            colors[m] + "' t '" + titles[m] + "'";
     gp += "\nunset multiplot\n";
     const fs::path script = dir / (rr.name + ".gp");
     write_file(script, gp);

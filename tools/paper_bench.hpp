@@ -42,6 +42,10 @@ struct ModeResult {
   control::PidGains gains;
   control::LoopMargins margins;
   control::ClosedLoopTrace trace;
+  /// Mean |r - y_true| of the same controller on a rig that equals the model
+  /// (no mismatch, no hysteresis/creep, no noise): the part of the error due
+  /// to finite loop bandwidth alone.
+  double bandwidth_only_mean_um = 0.0;
 };
 
 /// Results for one reference.
