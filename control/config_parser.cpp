@@ -1,86 +1,11 @@
 #include "control/config_parser.hpp"
 
-#include <cmath>
-#include <set>
-
 #include "control/config_error.hpp"
+#include "control/toml_reader.hpp"
 
 namespace pvcgel::control {
 
 namespace {
-
-/// Reads keys of one table, remembering which were used so leftovers can be
-/// reported as unknown (a typo must not silently fall back to a default).
-class TableReader {
- public:
-  TableReader(const toml::table* t, std::string prefix) : t_(t), prefix_(std::move(prefix)) {}
-
-  [[nodiscard]] std::string key(const std::string& k) const { return prefix_.empty() ? k : prefix_ + "." + k; }
-  [[nodiscard]] bool has(const std::string& k) const { return t_ && t_->contains(k); }
-
-  double number(const std::string& k, double fallback) {
-    used_.insert(k);
-    if (!has(k)) return fallback;
-    const auto& node = *t_->get(k);
-    if (auto v = node.value<double>()) {
-      if (!std::isfinite(*v)) throw ConfigError(key(k), "must be a finite number");
-      return *v;
-    }
-    throw ConfigError(key(k), "must be a number");
-  }
-  int integer(const std::string& k, int fallback) {
-    used_.insert(k);
-    if (!has(k)) return fallback;
-    if (auto v = t_->get(k)->value_exact<int64_t>()) return static_cast<int>(*v);
-    throw ConfigError(key(k), "must be an integer");
-  }
-  bool boolean(const std::string& k, bool fallback) {
-    used_.insert(k);
-    if (!has(k)) return fallback;
-    if (auto v = t_->get(k)->value_exact<bool>()) return *v;
-    throw ConfigError(key(k), "must be true or false");
-  }
-  std::string string(const std::string& k, const std::string& fallback) {
-    used_.insert(k);
-    if (!has(k)) return fallback;
-    if (auto v = t_->get(k)->value_exact<std::string>()) return *v;
-    throw ConfigError(key(k), "must be a string");
-  }
-  std::vector<double> numbers(const std::string& k) {
-    used_.insert(k);
-    if (!has(k)) throw ConfigError(key(k), "is required");
-    const auto* arr = t_->get(k)->as_array();
-    if (!arr || arr->empty()) throw ConfigError(key(k), "must be a non-empty array of numbers");
-    std::vector<double> out;
-    for (size_t i = 0; i < arr->size(); ++i) {
-      auto v = (*arr)[i].value<double>();
-      if (!v || !std::isfinite(*v))
-        throw ConfigError(key(k) + "[" + std::to_string(i) + "]", "must be a finite number");
-      out.push_back(*v);
-    }
-    return out;
-  }
-  TableReader table(const std::string& k) {
-    used_.insert(k);
-    if (!has(k)) return {nullptr, key(k)};
-    const auto* sub = t_->get(k)->as_table();
-    if (!sub) throw ConfigError(key(k), "must be a table");
-    return {sub, key(k)};
-  }
-  [[nodiscard]] bool present() const { return t_ != nullptr; }
-  void finish() const {
-    if (!t_) return;
-    for (const auto& [k, v] : *t_) {
-      const std::string name(k.str());
-      if (!used_.count(name)) throw ConfigError(key(name), "unknown key");
-    }
-  }
-
- private:
-  const toml::table* t_;
-  std::string prefix_;
-  std::set<std::string> used_;
-};
 
 HammersteinModel read_model(TableReader& t) {
   OddPolynomial f(t.numbers("poly"), t.key("poly"));
@@ -88,19 +13,11 @@ HammersteinModel read_model(TableReader& t) {
   return {std::move(f), std::move(G)};
 }
 
-void wrap_errors(const std::string& source, const auto& fn) {
-  try {
-    fn();
-  } catch (const ConfigError& e) {
-    throw ConfigError(e.key(), std::string(e.what()).substr(e.key().size() + 2) + " (in " + source + ")");
-  }
-}
-
 }  // namespace
 
 HammersteinModel parse_model(const toml::table& root, const std::string& source) {
   HammersteinModel m = paper_model(2);
-  wrap_errors(source, [&] {
+  with_source(source, [&] {
     TableReader top(&root, "");
     auto model = top.table("model");
     if (!model.present()) throw ConfigError("model", "no [model] table");
@@ -109,10 +26,12 @@ HammersteinModel parse_model(const toml::table& root, const std::string& source)
   return m;
 }
 
-RigConfiguration parse_configuration(const toml::table& root, const std::string& source) {
+RigConfiguration parse_configuration(const toml::table& root, const std::string& source,
+                                     const std::vector<std::string>& other_tables) {
   RigConfiguration cfg;
-  wrap_errors(source, [&] {
+  with_source(source, [&] {
     TableReader top(&root, "");
+    for (const auto& t : other_tables) top.skip(t);
     auto model = top.table("model");
     if (model.present()) {
       cfg.model = read_model(model);

@@ -22,7 +22,9 @@ struct RigConfiguration {
 /// the simulated rig are built once to run their own checks (monotone inverse,
 /// proper Q G^-1, closed-loop stability, ...).
 /// @param source  file name for messages
-RigConfiguration parse_configuration(const toml::table& root, const std::string& source);
+/// @param other_tables  top-level tables the caller parses itself (not unknown)
+RigConfiguration parse_configuration(const toml::table& root, const std::string& source,
+                                     const std::vector<std::string>& other_tables = {});
 
 /// Reads only a `[model]` table (identification output, or a full config).
 HammersteinModel parse_model(const toml::table& root, const std::string& source);

@@ -1,0 +1,123 @@
+#pragma once
+/// @file
+/// One cycle of the real-time loop: read, check, control, clamp, write; and
+/// the safety state machine around it. No threads or clocks here (see
+/// realtime_thread.hpp), so every path can be tested cycle by cycle.
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <string_view>
+
+#include "control/controller.hpp"
+#include "daemon/trajectory.hpp"
+#include "hal/hal.hpp"
+
+namespace pvcgel::daemon {
+
+/// Safety states. DISABLED -> ARMED -> RUNNING; any fault or stop goes through
+/// RAMP_DOWN (output ramps to 0 V, then high voltage is disabled) to FAULT or
+/// DISABLED. FAULT is left only by an explicit reset.
+enum class LoopState : std::uint8_t { disabled, armed, running, ramp_down, fault };
+
+/// Why the loop left RUNNING for FAULT. Carried in telemetry, recordings and logs.
+enum class FaultReason : std::uint8_t {
+  none,
+  sensor_nan,           ///< the sensor returned NaN or inf
+  sensor_out_of_range,  ///< outside [sensor_min_um, sensor_max_um]
+  sensor_stale,         ///< the exact same reading for too many cycles
+  sensor_timeout,       ///< too many consecutive reads without an answer
+  amplifier_fault,      ///< the amplifier (or its interlock) reports a fault
+  overrun_storm,        ///< too many consecutive missed deadlines
+  setpoint_stale,       ///< the setpoint source ran dry (policy ramp_down)
+  hal_error,            ///< another HAL failure (write failed, disconnected)
+};
+
+std::string_view to_string(LoopState s) noexcept;
+std::string_view to_string(FaultReason r) noexcept;
+
+/// What to do when the setpoint source runs out.
+enum class StaleSetpointPolicy : std::uint8_t { hold, ramp_down };
+
+/// Safety limits, validated at configuration time.
+struct SafetyConfig {
+  double ramp_down_V_per_s = 500.0;   ///< output ramp on stop/fault
+  double sensor_min_um = -50.0;       ///< plausible sensor range
+  double sensor_max_um = 1000.0;
+  int sensor_stale_cycles = 50;       ///< identical readings before a fault (0: off)
+  int sensor_timeout_cycles = 3;      ///< consecutive timeouts before a fault
+  int overrun_fault_after = 10;       ///< consecutive overruns before a fault (0: never)
+  StaleSetpointPolicy stale_setpoint = StaleSetpointPolicy::hold;
+  double soft_start_s = 2.0;          ///< blend from the measured position to the trajectory
+};
+
+/// One row of telemetry / recording. Row k: y measured at the start of cycle k
+/// and the voltage then applied and held until cycle k+1.
+struct CycleRecord {
+  std::uint64_t seq = 0;
+  double t_s = 0.0;
+  double u_V = 0.0;
+  double y_um = 0.0;
+  double r_um = 0.0;
+  double e_um = 0.0;
+  double d_hat = 0.0;
+  float latency_us = 0.0f;  ///< wake-up latency of this cycle
+  control::ControllerMode mode = control::ControllerMode::pid;
+  LoopState state = LoopState::disabled;
+  FaultReason fault = FaultReason::none;
+  bool high_voltage = false;
+};
+
+/// The loop's per-cycle logic. `cycle()` is real-time safe.
+class ControlLoop final {
+ public:
+  /// @param duration_s  run length of the trajectory (after the soft start); infinity: until stopped
+  ControlLoop(hal::Hal& hal, control::Controller& controller, const Trajectory& trajectory,
+              const SafetyConfig& safety, double period_s, double duration_s);
+
+  /// Run one cycle. `consecutive_overruns` comes from the timing thread.
+  CycleRecord cycle(float latency_us, int consecutive_overruns) noexcept;
+  /// Ask for a clean stop (ramp down, disable, finish). Any thread.
+  void request_stop() noexcept { stop_requested_.store(true, std::memory_order_relaxed); }
+  /// True once the loop has come to rest (DISABLED after a stop, or FAULT when
+  /// `exit_on_fault`) and the caller may end the thread.
+  [[nodiscard]] bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+  /// Current state and fault (any thread).
+  [[nodiscard]] LoopState state() const noexcept { return state_.load(std::memory_order_relaxed); }
+  [[nodiscard]] FaultReason fault() const noexcept { return fault_.load(std::memory_order_relaxed); }
+  /// Leave the loop finished after a fault instead of waiting in FAULT for a reset.
+  void set_exit_on_fault(bool v) noexcept { exit_on_fault_ = v; }
+  /// Arm and start by itself (a trajectory was given). Otherwise the loop idles
+  /// DISABLED at 0 V until a setpoint source starts it.
+  void set_auto_start(bool v) noexcept { auto_start_ = v; }
+
+ private:
+  FaultReason check_sensor(hal::HalStatus status, double y) noexcept;
+  double reference_at(double t_s) const noexcept;
+  void enter_ramp_down(FaultReason why) noexcept;
+
+  hal::Hal& hal_;
+  control::Controller& controller_;
+  const Trajectory& trajectory_;
+  SafetyConfig safety_;
+  double Ts_;
+  double duration_s_;
+  std::uint64_t k_ = 0;
+  std::uint64_t run_start_k_ = 0;
+  double start_y_um_ = 0.0;
+  double u_V_ = 0.0;
+  double last_y_ = 0.0;
+  double last_r_um_ = 0.0;
+  int same_reading_count_ = 0;
+  int timeout_count_ = 0;
+  FaultReason pending_fault_ = FaultReason::none;
+  bool exit_on_fault_ = false;
+  bool auto_start_ = true;
+  std::atomic<LoopState> state_{LoopState::disabled};
+  std::atomic<FaultReason> fault_{FaultReason::none};
+  std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> finished_{false};
+  std::array<double, 16> preview_{};
+};
+
+}  // namespace pvcgel::daemon

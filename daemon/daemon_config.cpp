@@ -1,0 +1,86 @@
+#include "daemon/daemon_config.hpp"
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "control/toml_reader.hpp"
+
+namespace pvcgel::daemon {
+
+using control::ConfigError;
+
+DaemonConfig load_daemon_config(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read configuration file '" + path + "'");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+
+  toml::table root;
+  try {
+    root = toml::parse(text, path);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream os;
+    os << path << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
+    throw std::runtime_error(os.str());
+  }
+
+  DaemonConfig cfg;
+  cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run"});
+  cfg.realtime.period_s = cfg.rig.controller.sample_time_s;
+
+  control::with_source(path, [&] {
+    control::TableReader top(&root, "");
+    auto loop = top.table("loop");
+    cfg.realtime.priority = loop.integer("priority", cfg.realtime.priority);
+    if (cfg.realtime.priority < 1 || cfg.realtime.priority > 99) throw ConfigError(loop.key("priority"), "must be 1..99");
+    cfg.realtime.cpu = loop.integer("cpu", cfg.realtime.cpu);
+    if (cfg.realtime.cpu < -1 || cfg.realtime.cpu > 1023) throw ConfigError(loop.key("cpu"), "must be -1 (no affinity) or a CPU number");
+    cfg.realtime.lock_memory = loop.boolean("lock_memory", cfg.realtime.lock_memory);
+    cfg.safety.overrun_fault_after = loop.integer("overrun_fault_after", cfg.safety.overrun_fault_after);
+    if (cfg.safety.overrun_fault_after < 0) throw ConfigError(loop.key("overrun_fault_after"), "must be >= 0 (0: never fault)");
+    loop.finish();
+
+    auto hal = top.table("hal");
+    cfg.hal_backend = hal.string("backend", cfg.hal_backend);
+    if (cfg.hal_backend != "sim")
+      throw ConfigError(hal.key("backend"), "'" + cfg.hal_backend + "' is not available in this build (only \"sim\"; the modbus/gpio drive is a separate issue)");
+    hal.finish();
+
+    auto s = top.table("safety");
+    auto& sc = cfg.safety;
+    sc.ramp_down_V_per_s = s.number("ramp_down_V_per_s", sc.ramp_down_V_per_s);
+    if (!(sc.ramp_down_V_per_s > 0.0)) throw ConfigError(s.key("ramp_down_V_per_s"), "must be positive");
+    sc.sensor_min_um = s.number("sensor_min_um", sc.sensor_min_um);
+    sc.sensor_max_um = s.number("sensor_max_um", sc.sensor_max_um);
+    if (!(sc.sensor_max_um > sc.sensor_min_um)) throw ConfigError(s.key("sensor_max_um"), "must be above sensor_min_um");
+    sc.sensor_stale_cycles = s.integer("sensor_stale_cycles", sc.sensor_stale_cycles);
+    if (sc.sensor_stale_cycles < 0) throw ConfigError(s.key("sensor_stale_cycles"), "must be >= 0 (0: off)");
+    sc.sensor_timeout_cycles = s.integer("sensor_timeout_cycles", sc.sensor_timeout_cycles);
+    if (sc.sensor_timeout_cycles < 1) throw ConfigError(s.key("sensor_timeout_cycles"), "must be >= 1");
+    const auto policy = s.string("stale_setpoint", "hold");
+    if (policy == "hold") sc.stale_setpoint = StaleSetpointPolicy::hold;
+    else if (policy == "ramp_down") sc.stale_setpoint = StaleSetpointPolicy::ramp_down;
+    else throw ConfigError(s.key("stale_setpoint"), "must be \"hold\" or \"ramp_down\"");
+    sc.soft_start_s = s.number("soft_start_s", sc.soft_start_s);
+    if (!(sc.soft_start_s >= 0.0)) throw ConfigError(s.key("soft_start_s"), "must be >= 0");
+    s.finish();
+
+    auto run = top.table("run");
+    cfg.trajectory = run.string("trajectory", "");
+    cfg.duration_s = run.number("duration_s", cfg.duration_s);
+    if (!(cfg.duration_s > 0.0)) throw ConfigError(run.key("duration_s"), "must be positive");
+    run.finish();
+  });
+
+  std::uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : text) h = (h ^ c) * 1099511628211ull;
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  cfg.config_hash = hex;
+  return cfg;
+}
+
+}  // namespace pvcgel::daemon

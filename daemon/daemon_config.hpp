@@ -1,0 +1,29 @@
+#pragma once
+/// @file
+/// pvcgeld's configuration file: the control tables plus [loop], [hal], [safety], [run].
+
+#include <limits>
+#include <string>
+
+#include "control/config_parser.hpp"
+#include "daemon/control_loop.hpp"
+#include "daemon/realtime_thread.hpp"
+
+namespace pvcgel::daemon {
+
+/// Everything pvcgeld reads from its TOML file, validated.
+struct DaemonConfig {
+  control::RigConfiguration rig;
+  RealtimeConfig realtime;
+  SafetyConfig safety;
+  std::string hal_backend = "sim";
+  std::string trajectory;  ///< empty: idle DISABLED until a setpoint source starts the loop
+  double duration_s = std::numeric_limits<double>::infinity();
+  std::string config_hash;  ///< FNV-1a 64 of the file's bytes, hex
+};
+
+/// Reads and validates `path`. @throws control::ConfigError naming the key and
+/// file, or std::runtime_error when the file cannot be read or parsed.
+DaemonConfig load_daemon_config(const std::string& path);
+
+}  // namespace pvcgel::daemon

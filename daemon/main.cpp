@@ -1,0 +1,192 @@
+// pvcgeld: the real-time controller daemon for a PVC gel actuator rig.
+#include <CLI/CLI.hpp>
+#include <systemd/sd-daemon.h>
+
+#include <csignal>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <thread>
+
+#include "control/config_error.hpp"
+#include "daemon/daemon_config.hpp"
+#include "daemon/recorder.hpp"
+#include "hal/sim_backend.hpp"
+
+using namespace pvcgel;
+using namespace pvcgel::daemon;
+
+namespace {
+
+constexpr int kExitOk = 0, kExitError = 1, kExitConfig = 2, kExitFault = 3;
+
+std::string iso_time_now() {
+  char buf[32];
+  const std::time_t t = std::time(nullptr);
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+struct Options {
+  std::string config = "/etc/pvcgel/pvcgeld.toml";
+  std::string trajectory, record, inject;
+  double duration = NAN;
+  bool check_only = false;
+};
+
+int run(const Options& opt) {
+  DaemonConfig cfg = load_daemon_config(opt.config);
+  if (!opt.trajectory.empty()) cfg.trajectory = opt.trajectory;
+  if (!std::isnan(opt.duration)) cfg.duration_s = opt.duration;
+  const bool has_trajectory = !cfg.trajectory.empty();
+  const Trajectory trajectory = Trajectory::parse(has_trajectory ? cfg.trajectory : "hold:0");
+  control::Controller controller(cfg.rig.model, cfg.rig.controller);
+  auto sim = std::make_unique<hal::SimBackend>(cfg.rig.sim);
+  if (!opt.inject.empty()) {
+    const auto at = opt.inject.find('@');
+    const auto kind = hal::parse_sim_fault(opt.inject.substr(0, at));
+    if (!kind || at == std::string::npos)
+      throw control::ConfigError("--inject-fault", "expected KIND@SECONDS with KIND one of sensor_nan, sensor_stuck, "
+                                                   "sensor_out_of_range, sensor_dropout, amplifier_fault; got '" +
+                                                       opt.inject + "'");
+    sim->schedule(*kind, std::stod(opt.inject.substr(at + 1)));
+  }
+  if (opt.check_only) {
+    std::cout << "pvcgeld: configuration " << opt.config << " is valid (hash " << cfg.config_hash << ")\n";
+    return kExitOk;
+  }
+  hal::Hal& hal = *sim;
+
+  ControlLoop loop(hal, controller, trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
+  loop.set_auto_start(has_trajectory);
+  loop.set_exit_on_fault(std::isfinite(cfg.duration_s));
+
+  std::unique_ptr<Recorder> recorder;
+  if (!opt.record.empty()) {
+    recorder = std::make_unique<Recorder>(
+        opt.record, std::vector<std::pair<std::string, std::string>>{
+                        {"rate_hz", std::to_string(static_cast<int>(std::lround(1.0 / cfg.realtime.period_s)))},
+                        {"config", opt.config},
+                        {"config_hash", cfg.config_hash},
+                        {"start_time", iso_time_now()},
+                        {"hal_backend", std::string(hal.name())},
+                        {"trajectory", cfg.trajectory},
+                        {"mode", std::string(control::to_string(cfg.rig.controller.mode))},
+                        {"soft_start_s", std::to_string(cfg.safety.soft_start_s)}});
+  }
+
+  // Signals are taken synchronously by this thread; the loop thread never sees them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  RealtimeReport report = lock_process_memory(cfg.realtime);
+  auto stats = std::make_unique<LoopStatistics>();
+  auto ring = std::make_unique<RecordRing>();
+  std::atomic<bool> started{false}, loop_done{false};
+  std::thread rt([&] {
+    run_realtime_loop(loop, cfg.realtime, *stats, *ring, report, started);
+    loop_done.store(true, std::memory_order_release);
+  });
+  std::thread writer;
+  std::exception_ptr writer_error;
+  if (recorder) {
+    writer = std::thread([&] {
+      try {
+        recorder->run(*ring, loop_done);
+      } catch (...) {
+        writer_error = std::current_exception();
+      }
+    });
+  } else {
+    writer = std::thread([&] {
+      while (!loop_done.load(std::memory_order_acquire) || ring->size() > 0) {
+        while (ring->pop()) {
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      }
+    });
+  }
+  while (!started.load(std::memory_order_acquire)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (!report.warnings.empty())
+    std::cerr << "pvcgeld: WARNING: " << report.warnings << "\n";
+  std::cerr << "pvcgeld: loop running at " << 1.0 / cfg.realtime.period_s << " Hz, "
+            << (report.realtime_scheduling ? "SCHED_FIFO priority " + std::to_string(cfg.realtime.priority)
+                                           : std::string("NOT real-time (SCHED_OTHER)"))
+            << ", memory " << (report.memory_locked ? "locked" : "NOT locked") << ", backend " << hal.name()
+            << ", mode " << control::to_string(cfg.rig.controller.mode)
+            << (has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)")) << "\n";
+  sd_notify(0, "READY=1");
+
+  std::uint64_t watchdog_usec = 0;
+  const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0;
+  std::uint64_t last_cycles = 0;
+  auto last_ping = std::chrono::steady_clock::now();
+  bool stop_sent = false;
+  while (!loop_done.load(std::memory_order_acquire)) {
+    const timespec timeout{0, 20'000'000};
+    const int sig = sigtimedwait(&signals, nullptr, &timeout);
+    if ((sig == SIGTERM || sig == SIGINT) && !stop_sent) {
+      std::cerr << "pvcgeld: " << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ": ramping down\n";
+      sd_notify(0, "STOPPING=1");
+      loop.request_stop();
+      stop_sent = true;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (watchdog && now - last_ping > std::chrono::microseconds(watchdog_usec / 2)) {
+      // Only a loop that keeps cycling without an overrun storm feeds the watchdog.
+      const auto cycles = stats->cycles.load(std::memory_order_relaxed);
+      if (cycles > last_cycles && loop.fault() != FaultReason::overrun_storm) sd_notify(0, "WATCHDOG=1");
+      last_cycles = cycles;
+      last_ping = now;
+    }
+  }
+  rt.join();
+  writer.join();
+  if (writer_error) std::rethrow_exception(writer_error);
+
+  const auto& s = *stats;
+  std::fprintf(stderr,
+               "pvcgeld: stopped in state %s (fault: %s) after %llu cycles; wake-up latency p50 %.0f us, p99 %.0f "
+               "us, p99.9 %.0f us, max %.0f us; compute p99 %.0f us; overruns %llu; records dropped %llu",
+               to_string(loop.state()).data(), to_string(loop.fault()).data(),
+               static_cast<unsigned long long>(s.cycles.load()), s.wakeup_latency.quantile_us(0.5),
+               s.wakeup_latency.quantile_us(0.99), s.wakeup_latency.quantile_us(0.999),
+               static_cast<double>(s.wakeup_latency.max_ns()) * 1e-3, s.compute_time.quantile_us(0.99),
+               static_cast<unsigned long long>(s.overruns.load()),
+               static_cast<unsigned long long>(s.records_dropped.load()));
+  if (recorder)
+    std::fprintf(stderr, "; recorded %llu rows to %s (sequence gaps %llu)", static_cast<unsigned long long>(recorder->rows()),
+                 opt.record.c_str(), static_cast<unsigned long long>(recorder->gaps()));
+  std::fprintf(stderr, "\n");
+  return loop.state() == LoopState::fault ? kExitFault : kExitOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"pvcgeld: real-time controller daemon for PVC gel actuator rigs"};
+  Options opt;
+  app.add_option("-c,--config", opt.config, "configuration file")->capture_default_str();
+  app.add_option("-t,--trajectory", opt.trajectory,
+                 "setpoints: hold:R | sine:OFFSET,AMP,FREQ | multisine:OFFSET,A1,F1,... | csv:FILE | "
+                 "paper-0.1hz | paper-0.5hz | paper-1hz | paper-multi");
+  app.add_option("-d,--duration", opt.duration, "run the trajectory this long (s), then ramp down and exit")
+      ->check(CLI::PositiveNumber);
+  app.add_option("-r,--record", opt.record, "record every cycle to this CSV file");
+  app.add_option("--inject-fault", opt.inject, "sim backend only: KIND@SECONDS, e.g. sensor_nan@3");
+  app.add_flag("--check-config", opt.check_only, "validate the configuration and exit");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    return run(opt);
+  } catch (const control::ConfigError& e) {
+    std::cerr << "pvcgeld: configuration error: " << e.what() << "\n";
+    return kExitConfig;
+  } catch (const std::exception& e) {
+    std::cerr << "pvcgeld: " << e.what() << "\n";
+    return kExitError;
+  }
+}

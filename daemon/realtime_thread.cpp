@@ -1,0 +1,102 @@
+#include "daemon/realtime_thread.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#include <time.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+
+namespace pvcgel::daemon {
+
+namespace {
+constexpr std::int64_t kNsPerS = 1'000'000'000;
+
+std::int64_t now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * kNsPerS + ts.tv_nsec;
+}
+
+timespec to_timespec(std::int64_t ns) noexcept {
+  return {static_cast<time_t>(ns / kNsPerS), static_cast<long>(ns % kNsPerS)};
+}
+
+// Touch the stack now so the loop never takes a page fault growing it.
+void prefault_stack() noexcept {
+  constexpr std::size_t kBytes = 256 * 1024;
+  volatile unsigned char buffer[kBytes];
+  for (std::size_t i = 0; i < kBytes; i += 4096) buffer[i] = 0;
+  (void)buffer[0];
+}
+}  // namespace
+
+RealtimeReport lock_process_memory(const RealtimeConfig& cfg) {
+  RealtimeReport r;
+  if (!cfg.lock_memory) {
+    r.warnings += "memory locking disabled by configuration; ";
+    return r;
+  }
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
+    r.memory_locked = true;
+  } else {
+    r.warnings += std::string("mlockall failed (") + std::strerror(errno) +
+                  "): page faults may stall the loop (needs CAP_IPC_LOCK or LimitMEMLOCK=infinity); ";
+  }
+  return r;
+}
+
+void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats, RecordRing& records,
+                       RealtimeReport& report, std::atomic<bool>& started) {
+  sched_param sp{};
+  sp.sched_priority = cfg.priority;
+  const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  if (rc == 0) {
+    report.realtime_scheduling = true;
+  } else {
+    report.warnings += std::string("SCHED_FIFO priority ") + std::to_string(cfg.priority) + " refused (" +
+                       std::strerror(rc) + "): running WITHOUT real-time scheduling, timing is best effort "
+                       "(needs CAP_SYS_NICE / LimitRTPRIO); ";
+  }
+  if (cfg.cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cfg.cpu, &set);
+    if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) == 0) report.pinned = true;
+    else report.warnings += "CPU affinity to " + std::to_string(cfg.cpu) + " refused; ";
+  }
+  prefault_stack();
+  started.store(true, std::memory_order_release);
+
+  const auto period_ns = static_cast<std::int64_t>(std::llround(cfg.period_s * 1e9));
+  std::int64_t deadline = now_ns() + period_ns;
+  int consecutive_overruns = 0;
+  while (!loop.finished()) {
+    const timespec ts = to_timespec(deadline);
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    }
+    const std::int64_t woke = now_ns();
+    const std::int64_t latency = woke - deadline;
+    stats.wakeup_latency.add(latency);
+    const CycleRecord rec = loop.cycle(static_cast<float>(latency) * 1e-3f, consecutive_overruns);
+    if (!records.push(rec)) stats.records_dropped.fetch_add(1, std::memory_order_relaxed);
+    const std::int64_t done = now_ns();
+    stats.compute_time.add(done - woke);
+    stats.cycles.fetch_add(1, std::memory_order_relaxed);
+    deadline += period_ns;
+    if (done > deadline) {
+      // Missed at least one period: count it and re-align to the next future
+      // period instead of firing a burst of late cycles.
+      stats.overruns.fetch_add(1, std::memory_order_relaxed);
+      ++consecutive_overruns;
+      const std::int64_t missed = (done - deadline) / period_ns + 1;
+      deadline += missed * period_ns;
+    } else {
+      consecutive_overruns = 0;
+    }
+  }
+}
+
+}  // namespace pvcgel::daemon

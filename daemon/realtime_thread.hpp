@@ -1,0 +1,44 @@
+#pragma once
+/// @file
+/// The real-time thread: memory locking, SCHED_FIFO, absolute-time wake-ups.
+
+#include <atomic>
+#include <string>
+
+#include "daemon/control_loop.hpp"
+#include "daemon/loop_statistics.hpp"
+#include "daemon/spsc_ring.hpp"
+
+namespace pvcgel::daemon {
+
+/// Timing and scheduling of the loop thread.
+struct RealtimeConfig {
+  double period_s = 1e-3;
+  int priority = 80;     ///< SCHED_FIFO priority, 1..99
+  int cpu = -1;          ///< pin to this CPU; -1: no affinity
+  bool lock_memory = true;
+};
+
+/// What the process got from the kernel. Without privileges the loop still
+/// runs (in a container, say), but says so loudly.
+struct RealtimeReport {
+  bool memory_locked = false;
+  bool realtime_scheduling = false;
+  bool pinned = false;
+  std::string warnings;  ///< empty when everything was granted
+};
+
+/// Records from the loop to the recorder: 65 s of 1 kHz cycles.
+using RecordRing = SpscRing<CycleRecord, 1u << 16>;
+
+/// mlockall(MCL_CURRENT | MCL_FUTURE); call once from main before threads start.
+RealtimeReport lock_process_memory(const RealtimeConfig& cfg);
+
+/// Body of the loop thread: applies scheduling and affinity to itself, pre-faults
+/// its stack, then runs `loop.cycle()` every period until `loop.finished()`.
+/// Each record goes to `records` (a full ring is counted, never waited on).
+/// `report` receives the scheduling outcome before the first cycle.
+void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats,
+                       RecordRing& records, RealtimeReport& report, std::atomic<bool>& started);
+
+}  // namespace pvcgel::daemon

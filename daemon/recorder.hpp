@@ -1,0 +1,46 @@
+#pragma once
+/// @file
+/// Writes every cycle of the loop to a CSV recording, off the real-time thread.
+
+#include <atomic>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "daemon/realtime_thread.hpp"
+
+namespace pvcgel::daemon {
+
+/// The recording format the tools read:
+/// ```
+/// # pvcgel-recording: 1
+/// # rate_hz: 1000
+/// # ... (more `# key: value` lines)
+/// t_s,u_V,y_um,r_um,e_um,d_hat,mode,state,fault,hv,latency_us
+/// ```
+/// Row k: `y_um` measured at the start of cycle k (`t_s`), then `u_V` applied
+/// and held until cycle k+1 (zero-order hold).
+class Recorder final {
+ public:
+  /// Opens the file and writes the header. @throws std::runtime_error naming the path.
+  Recorder(const std::string& path, const std::vector<std::pair<std::string, std::string>>& header);
+  ~Recorder();
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  /// Drains the ring until `done` is set and the ring is empty; flushes about
+  /// every 100 ms so a crash loses at most that much. Checks sequence numbers.
+  void run(RecordRing& ring, const std::atomic<bool>& done);
+  /// Rows written.
+  [[nodiscard]] std::uint64_t rows() const noexcept { return rows_; }
+  /// Missing sequence numbers seen (must be 0).
+  [[nodiscard]] std::uint64_t gaps() const noexcept { return gaps_; }
+
+ private:
+  void write(const CycleRecord& r);
+  std::FILE* file_ = nullptr;
+  std::string path_;
+  std::uint64_t rows_ = 0, gaps_ = 0, next_seq_ = 0;
+};
+
+}  // namespace pvcgel::daemon

@@ -1,0 +1,113 @@
+#include "daemon/trajectory.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "control/config_error.hpp"
+
+namespace pvcgel::daemon {
+
+using control::ConfigError;
+
+namespace {
+std::vector<double> parse_numbers(std::string_view s, const std::string& spec) {
+  std::vector<double> out;
+  std::stringstream ss{std::string(s)};
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    double v = 0.0;
+    const auto* b = item.data();
+    const auto [p, ec] = std::from_chars(b, b + item.size(), v);
+    if (ec != std::errc() || p != b + item.size() || !std::isfinite(v))
+      throw ConfigError("trajectory", "'" + spec + "': '" + item + "' is not a number");
+    out.push_back(v);
+  }
+  return out;
+}
+}  // namespace
+
+Trajectory Trajectory::parse(std::string_view spec_view) {
+  Trajectory t;
+  t.spec_ = std::string(spec_view);
+  const std::string& spec = t.spec_;
+  if (auto paper = control::paper_reference(spec); paper && spec.rfind("paper-", 0) == 0) {
+    t.analytic_ = *paper;
+    return t;
+  }
+  const auto colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon);
+  const std::string args = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  auto& a = t.analytic_;
+  if (kind == "hold" || kind == "sine" || kind == "multisine") {
+    const auto v = parse_numbers(args, spec);
+    if (kind == "hold" && v.size() == 1) {
+      a.offset_um = v[0];
+      return t;
+    }
+    if (kind == "sine" && v.size() == 3) {
+      a.offset_um = v[0];
+      a.tones[0] = {v[1], v[2], 0.0};
+      a.n_tones = 1;
+    } else if (kind == "multisine" && v.size() >= 3 && v.size() % 2 == 1 &&
+               (v.size() - 1) / 2 <= static_cast<size_t>(control::MultiSine::kMaxTones)) {
+      a.offset_um = v[0];
+      a.n_tones = static_cast<int>((v.size() - 1) / 2);
+      for (int i = 0; i < a.n_tones; ++i)
+        a.tones[static_cast<size_t>(i)] = {v[static_cast<size_t>(1 + 2 * i)], v[static_cast<size_t>(2 + 2 * i)], 0.0};
+    } else {
+      throw ConfigError("trajectory", "'" + spec +
+                                          "': expected hold:R, sine:OFFSET,AMPLITUDE,FREQ_HZ or "
+                                          "multisine:OFFSET,A1,F1[,A2,F2...] (at most 8 tones)");
+    }
+    for (int i = 0; i < a.n_tones; ++i)
+      if (!(a.tones[static_cast<size_t>(i)].frequency_Hz > 0.0))
+        throw ConfigError("trajectory", "'" + spec + "': frequencies must be positive");
+    return t;
+  }
+  if (kind == "csv") {
+    std::ifstream in(args);
+    if (!in) throw ConfigError("trajectory", "cannot open CSV file '" + args + "'");
+    std::string line;
+    int lineno = 0;
+    while (std::getline(in, line)) {
+      ++lineno;
+      if (line.empty() || line[0] == '#') continue;
+      if (line.rfind("t_s", 0) == 0) continue;  // header
+      const auto v = [&] {
+        try {
+          return parse_numbers(line, spec);
+        } catch (const ConfigError&) {
+          throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": expected 't_s,r_um', got '" + line + "'");
+        }
+      }();
+      if (v.size() != 2)
+        throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": expected 2 columns t_s,r_um");
+      if (!t.t_.empty() && !(v[0] > t.t_.back()))
+        throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": time must increase strictly");
+      t.t_.push_back(v[0]);
+      t.r_.push_back(v[1]);
+    }
+    if (t.t_.size() < 2) throw ConfigError("trajectory", args + ": needs at least 2 samples");
+    if (t.t_.front() != 0.0) throw ConfigError("trajectory", args + ": the first sample must be at t_s = 0");
+    t.end_s_ = t.t_.back();
+    return t;
+  }
+  throw ConfigError("trajectory", "unknown trajectory '" + spec +
+                                      "' (hold:, sine:, multisine:, csv:, paper-0.1hz, paper-0.5hz, "
+                                      "paper-1hz, paper-multi)");
+}
+
+double Trajectory::at(double time) const noexcept {
+  if (t_.empty()) return analytic_(time);
+  if (time <= t_.front()) return r_.front();
+  if (time >= t_.back()) return r_.back();
+  const auto it = std::upper_bound(t_.begin(), t_.end(), time);
+  const size_t i = static_cast<size_t>(it - t_.begin());
+  const double s = (time - t_[i - 1]) / (t_[i] - t_[i - 1]);
+  return r_[i - 1] + s * (r_[i] - r_[i - 1]);
+}
+
+}  // namespace pvcgel::daemon
