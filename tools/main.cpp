@@ -4,11 +4,13 @@
 
 #include "control/config_error.hpp"
 #include "tools/bench_command.hpp"
+#include "tools/show_command.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"pvcgel: identification, diagnosis, benchmarks and rig control for PVC gel actuators"};
   app.require_subcommand(1);
   pvcgel::tools::add_bench_command(app);
+  pvcgel::tools::add_show_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

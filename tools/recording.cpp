@@ -1,0 +1,133 @@
+#include "tools/recording.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace pvcgel::tools {
+
+namespace {
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string item;
+  while (std::getline(ss, item, ',')) out.push_back(item);
+  if (!line.empty() && line.back() == ',') out.emplace_back();
+  return out;
+}
+bool to_number(const std::string& s, double& v) {
+  if (s == "nan" || s == "-nan") {
+    v = NAN;
+    return true;
+  }
+  const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  return ec == std::errc() && p == s.data() + s.size();
+}
+}  // namespace
+
+const std::vector<double>& Recording::col(const std::string& name) const {
+  const auto it = numeric.find(name);
+  if (it == numeric.end()) throw std::runtime_error(path + ": no numeric column '" + name + "'");
+  return it->second;
+}
+
+Recording read_recording(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open recording '" + path + "'");
+  Recording rec;
+  rec.path = path;
+  std::string line;
+  int lineno = 0;
+  std::vector<std::string> names;
+  std::vector<std::vector<std::string>> cells;
+  std::vector<int> line_of_row;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) continue;
+    if (line[0] == '#') {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) {
+        auto key = line.substr(1, colon - 1);
+        auto value = line.substr(colon + 1);
+        key.erase(0, key.find_first_not_of(' '));
+        value.erase(0, value.find_first_not_of(' '));
+        rec.header[key] = value;
+      }
+      continue;
+    }
+    if (names.empty()) {
+      names = split(line);
+      for (const char* required : {"t_s", "u_V", "y_um"})
+        if (std::find(names.begin(), names.end(), required) == names.end())
+          throw std::runtime_error(path + ":" + std::to_string(lineno) + ": header lacks column '" + required +
+                                   "' (need at least t_s,u_V,y_um)");
+      continue;
+    }
+    auto row = split(line);
+    if (row.size() != names.size())
+      throw std::runtime_error(path + ":" + std::to_string(lineno) + ": " + std::to_string(row.size()) +
+                               " fields, header has " + std::to_string(names.size()));
+    cells.push_back(std::move(row));
+    line_of_row.push_back(lineno);
+  }
+  if (names.empty()) throw std::runtime_error(path + ": no header row");
+  if (cells.size() < 2) throw std::runtime_error(path + ": fewer than 2 data rows");
+
+  for (size_t c = 0; c < names.size(); ++c) {
+    std::vector<double> v(cells.size());
+    bool numeric = true;
+    for (size_t r = 0; r < cells.size() && numeric; ++r) numeric = to_number(cells[r][c], v[r]);
+    if (numeric) rec.numeric[names[c]] = std::move(v);
+    else {
+      auto& t = rec.text[names[c]];
+      for (auto& row : cells) t.push_back(row[c]);
+    }
+  }
+  for (const char* required : {"t_s", "u_V", "y_um"})
+    if (!rec.numeric.count(required)) throw std::runtime_error(path + ": column '" + required + "' is not numeric");
+
+  // Drop rows whose core values are not finite, counting them.
+  const auto& t0 = rec.numeric["t_s"];
+  std::vector<bool> keep(t0.size(), true);
+  for (size_t r = 0; r < t0.size(); ++r)
+    for (const char* k : {"t_s", "u_V", "y_um"})
+      if (!std::isfinite(rec.numeric[k][r])) keep[r] = false;
+  for (auto* m : {&rec.numeric}) {
+    for (auto& [name, v] : *m) {
+      std::vector<double> kept;
+      for (size_t r = 0; r < v.size(); ++r)
+        if (keep[r]) kept.push_back(v[r]);
+      v = std::move(kept);
+    }
+  }
+  for (auto& [name, v] : rec.text) {
+    std::vector<std::string> kept;
+    for (size_t r = 0; r < v.size(); ++r)
+      if (keep[r]) kept.push_back(v[r]);
+    v = std::move(kept);
+  }
+  std::vector<int> lines;
+  for (size_t r = 0; r < keep.size(); ++r)
+    if (keep[r]) lines.push_back(line_of_row[r]);
+    else ++rec.skipped_rows;
+
+  const auto& t = rec.numeric["t_s"];
+  if (t.size() < 2) throw std::runtime_error(path + ": fewer than 2 valid rows");
+  const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
+  if (!(dt > 0.0)) throw std::runtime_error(path + ": time does not increase");
+  for (size_t r = 1; r < t.size(); ++r) {
+    const double step = t[r] - t[r - 1];
+    if (!(step > 0.0) || std::abs(step - dt) > 0.01 * dt + 1e-9)
+      throw std::runtime_error(path + ":" + std::to_string(lines[r]) + ": non-uniform or non-monotone time (step " +
+                               std::to_string(step) + " s, expected " + std::to_string(dt) + " s)" +
+                               (rec.skipped_rows ? " after skipping " + std::to_string(rec.skipped_rows) + " invalid rows" : ""));
+  }
+  rec.sample_time_s = dt;
+  return rec;
+}
+
+}  // namespace pvcgel::tools

@@ -1,0 +1,32 @@
+#pragma once
+/// @file
+/// Reading the daemon's recording format (see daemon/recorder.hpp).
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace pvcgel::tools {
+
+/// A recording in memory: numeric columns by name, text columns by name, and
+/// the `# key: value` header lines.
+struct Recording {
+  std::string path;
+  std::map<std::string, std::string> header;
+  std::map<std::string, std::vector<double>> numeric;
+  std::map<std::string, std::vector<std::string>> text;
+  long skipped_rows = 0;  ///< rows with a non-finite value in t_s, u_V or y_um (counted, reported)
+  double sample_time_s = 0.0;
+
+  [[nodiscard]] size_t rows() const { return numeric.at("t_s").size(); }
+  [[nodiscard]] const std::vector<double>& col(const std::string& name) const;
+  [[nodiscard]] bool has(const std::string& name) const { return numeric.count(name) || text.count(name); }
+};
+
+/// Reads and checks a recording: the header must have at least t_s, u_V and
+/// y_um; time must increase uniformly (1% tolerance). Columns that parse as
+/// numbers everywhere are numeric, others text.
+/// @throws std::runtime_error naming the file, line and reason.
+Recording read_recording(const std::string& path);
+
+}  // namespace pvcgel::tools
