@@ -64,8 +64,9 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     if (pid.present()) {
       cc.tuning.reset();
       for (auto m : kAllModes) {
-        auto g = pid.table(std::string(to_string(m)));
-        if (!g.present()) throw ConfigError(g.key(""), "manual gains need a table for every mode");
+        const std::string name(to_string(m));
+        auto g = pid.table(name);
+        if (!g.present()) throw ConfigError(pid.key(name), "manual gains need a table for every mode");
         auto& gains = cc.gains[static_cast<size_t>(m)];
         gains = {g.number("kp", 0.0), g.number("ki", 0.0), g.number("kd", 0.0), g.number("tf_s", 0.0)};
         g.finish();
@@ -85,7 +86,9 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     auto s = top.table("sim");
     auto& sc = cfg.sim;
     sc.sample_time_s = cc.sample_time_s;
-    sc.seed = static_cast<std::uint64_t>(s.integer("seed", static_cast<int>(sc.seed)));
+    const int seed = s.integer("seed", static_cast<int>(sc.seed));
+    if (seed < 0) throw ConfigError(s.key("seed"), "must be >= 0");
+    sc.seed = static_cast<std::uint64_t>(seed);
     sc.io_delay_samples = s.integer("io_delay_samples", sc.io_delay_samples);
     sc.noise_sigma_um = s.number("noise_sigma_um", sc.noise_sigma_um);
     sc.quantization_um = s.number("quantization_um", sc.quantization_um);

@@ -1,5 +1,6 @@
 #include "control/controller.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -47,7 +48,13 @@ Controller::Controller(const HammersteinModel& model, const ControllerConfig& cf
         check_range("controller.voltage_max_V", cfg.voltage_max_V, 0.0, 1000.0);
         if (!(cfg.voltage_max_V > cfg.voltage_min_V))
           throw ConfigError("controller.voltage_max_V", "must be above controller.voltage_min_V");
-        return PolynomialInverse(model.f, cfg.voltage_min_V, cfg.voltage_max_V);
+        // f must be monotone over the limits (this throws with the usable range if not);
+        // the inverse itself spans as far as f stays monotone, so a request beyond the
+        // limits shows up as an unclamped voltage the output stage then clamps.
+        (void)PolynomialInverse(model.f, cfg.voltage_min_V, cfg.voltage_max_V);
+        const auto turn = model.f.first_turnover(1000.0);
+        const double upper = turn ? std::max(cfg.voltage_max_V, 0.999 * *turn) : 1000.0;
+        return PolynomialInverse(model.f, 0.0, upper);
       }()),
       dob_(model, plant_, cfg.dob_lambda_s, cfg.dob_q_order),
       ff_(plant_),
@@ -61,7 +68,7 @@ Controller::Controller(const HammersteinModel& model, const ControllerConfig& cf
   output_ = OutputStage(cfg.voltage_min_V, cfg.voltage_max_V, cfg.slew_limit_V_per_s, cfg.sample_time_s);
 
   const double dc = model_.G.dc_gain();
-  const double u_op = inverse_(cfg.operating_point_um / dc);
+  const double u_op = std::clamp(inverse_(cfg.operating_point_um / dc), cfg.voltage_min_V, cfg.voltage_max_V);
   pid_plant_gain_ = model_.f.derivative(u_op);
   if (!(pid_plant_gain_ > 0.0)) throw ConfigError("controller.operating_point_um", "f' is not positive there");
 
@@ -111,7 +118,7 @@ double Controller::voltage_for(double v, ControllerMode m) const noexcept {
 
 void Controller::reset_steady_state(double r0) noexcept {
   const double v0 = r0 / model_.G.dc_gain();
-  const double u0 = inverse_(v0);
+  const double u0 = std::clamp(inverse_(v0), cfg_.voltage_min_V, cfg_.voltage_max_V);
   const double w0 = model_.f(u0);
   dob_.reset_steady_state(w0, model_.G.dc_gain());
   ff_.reset_steady_state(r0);
@@ -170,7 +177,10 @@ ControlOutput Controller::step(std::span<const double> preview, double y) noexce
     out.v_command = v;
     out.unclamped_V = voltage_for(v, mode_);
     out.voltage_V = output_.apply(out.unclamped_V);
-    applied_equivalent = c + (linear_input_for(out.voltage_V, mode_) - v);
+    const double achieved = linear_input_for(out.voltage_V, mode_);
+    applied_equivalent = c + (achieved - v);
+    // Beyond f's range or clamped by the output stage: the command was not achieved.
+    if (std::abs(achieved - v) > 1e-9 * (1.0 + std::abs(v))) out.status = ControlOutput::Status::saturated;
   }
   pid_.commit(e, c, applied_equivalent);
   const double w_applied = model_.f(out.voltage_V);

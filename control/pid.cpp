@@ -11,9 +11,13 @@ DiscreteTransferFunction pid_transfer_function(const PidGains& g, double Ts) {
     const Eigen::VectorXd one = Eigen::VectorXd::Ones(1);
     return (DiscreteTransferFunction{x, one} * DiscreteTransferFunction{y, one}).b;
   };
-  Eigen::VectorXd bi(2), ai(2);
-  bi << 0.0, g.ki * Ts;
-  ai << 1.0, -1.0;
+  Eigen::VectorXd bi = Eigen::VectorXd::Zero(1), ai = Eigen::VectorXd::Ones(1);
+  if (g.ki != 0.0) {  // without I, leave out the integrator pole rather than cancel it
+    bi.resize(2);
+    ai.resize(2);
+    bi << 0.0, g.ki * Ts;
+    ai << 1.0, -1.0;
+  }
   Eigen::VectorXd bd = Eigen::VectorXd::Zero(1), ad = Eigen::VectorXd::Ones(1);
   if (g.kd != 0.0) {  // without D, leave out the filter pole rather than cancel it
     const double den0 = 2.0 * g.tf_s + Ts;

@@ -6,6 +6,7 @@
 #include <toml++/toml.h>
 
 #include <cmath>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -36,7 +37,11 @@ class TableReader {
   int integer(const std::string& k, int fallback) {
     used_.insert(k);
     if (!has(k)) return fallback;
-    if (auto v = t_->get(k)->value_exact<int64_t>()) return static_cast<int>(*v);
+    if (auto v = t_->get(k)->value_exact<int64_t>()) {
+      if (*v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max())
+        throw ConfigError(key(k), "integer " + std::to_string(*v) + " is out of range");
+      return static_cast<int>(*v);
+    }
     throw ConfigError(key(k), "must be an integer");
   }
   bool boolean(const std::string& k, bool fallback) {

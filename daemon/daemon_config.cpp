@@ -13,7 +13,8 @@ using control::ConfigError;
 
 DaemonConfig load_daemon_config(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot read configuration file '" + path + "'");
+  // Unreadable or unparsable files are configuration errors too (exit 2: systemd must not restart).
+  if (!in) throw ConfigError("--config", "cannot read configuration file '" + path + "'");
   std::stringstream buffer;
   buffer << in.rdbuf();
   const std::string text = buffer.str();
@@ -24,7 +25,7 @@ DaemonConfig load_daemon_config(const std::string& path) {
   } catch (const toml::parse_error& e) {
     std::ostringstream os;
     os << path << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
-    throw std::runtime_error(os.str());
+    throw ConfigError("--config", os.str());
   }
 
   DaemonConfig cfg;

@@ -23,7 +23,7 @@ struct DaemonConfig {
 };
 
 /// Reads and validates `path`. @throws control::ConfigError naming the key and
-/// file, or std::runtime_error when the file cannot be read or parsed.
+/// file (key "--config" when the file cannot be read or is not valid TOML).
 DaemonConfig load_daemon_config(const std::string& path);
 
 }  // namespace pvcgel::daemon

@@ -34,7 +34,7 @@ const std::vector<double>& Recording::col(const std::string& name) const {
   return it->second;
 }
 
-Recording read_recording(const std::string& path) {
+Recording read_recording(const std::string& path, bool keep_invalid_rows) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error("cannot open recording '" + path + "'");
   Recording rec;
@@ -93,9 +93,12 @@ Recording read_recording(const std::string& path) {
   // Drop rows whose core values are not finite, counting them.
   const auto& t0 = rec.numeric["t_s"];
   std::vector<bool> keep(t0.size(), true);
-  for (size_t r = 0; r < t0.size(); ++r)
+  for (size_t r = 0; r < t0.size(); ++r) {
     for (const char* k : {"t_s", "u_V", "y_um"})
       if (!std::isfinite(rec.numeric[k][r])) keep[r] = false;
+    if (!keep[r]) ++rec.invalid_rows;
+    if (keep_invalid_rows && std::isfinite(t0[r])) keep[r] = true;
+  }
   for (auto* m : {&rec.numeric}) {
     for (auto& [name, v] : *m) {
       std::vector<double> kept;

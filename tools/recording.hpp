@@ -15,7 +15,8 @@ struct Recording {
   std::map<std::string, std::string> header;
   std::map<std::string, std::vector<double>> numeric;
   std::map<std::string, std::vector<std::string>> text;
-  long skipped_rows = 0;  ///< rows with a non-finite value in t_s, u_V or y_um (counted, reported)
+  long skipped_rows = 0;  ///< rows dropped for a non-finite t_s, u_V or y_um (counted, reported)
+  long invalid_rows = 0;  ///< rows with a non-finite t_s, u_V or y_um (kept or skipped)
   double sample_time_s = 0.0;
 
   [[nodiscard]] size_t rows() const { return numeric.at("t_s").size(); }
@@ -26,7 +27,9 @@ struct Recording {
 /// Reads and checks a recording: the header must have at least t_s, u_V and
 /// y_um; time must increase uniformly (1% tolerance). Columns that parse as
 /// numbers everywhere are numeric, others text.
+/// @param keep_invalid_rows  keep rows whose u_V or y_um is not finite (a
+///        faulted sensor is recorded as NaN); t_s must be finite regardless
 /// @throws std::runtime_error naming the file, line and reason.
-Recording read_recording(const std::string& path);
+Recording read_recording(const std::string& path, bool keep_invalid_rows = false);
 
 }  // namespace pvcgel::tools

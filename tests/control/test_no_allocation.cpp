@@ -1,0 +1,85 @@
+// Proof that the real-time path does not allocate: this executable replaces the global
+// allocation functions with counting versions, so it is built on its own (see
+// tests/CMakeLists.txt) and must not be linked into test_control.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include <ostream>
+#include <span>
+#include <vector>
+
+#include "control/controller.hpp"
+#include "support/allocation_counter.hpp"
+#include "control/reference_signal.hpp"
+#include "control/simulated_rig.hpp"
+
+namespace pvcgel::control {
+
+// Readable test parameters in gtest / ctest output (found by ADL).
+void PrintTo(ControllerMode m, std::ostream* os) { *os << to_string(m); }
+
+namespace {
+
+// Keeps the optimiser from eliding an allocation whose result is otherwise unused.
+template <class T>
+void escape(T* p) {
+  asm volatile("" : : "g"(p) : "memory");
+}
+
+TEST(NoAllocation, CounterSeesAllocations) {
+  const long before = g_allocations.load();
+  std::vector<double> v;
+  v.push_back(1.0);
+  escape(v.data());
+  EXPECT_GE(g_allocations.load() - before, 1) << "the counting operator new is not in effect";
+  auto* p = new int(3);
+  escape(p);
+  delete p;
+  EXPECT_GE(g_allocations.load() - before, 2);
+}
+
+class NoAllocation : public ::testing::TestWithParam<ControllerMode> {};
+
+TEST_P(NoAllocation, ControllerStepRigAndModeSwitchesDoNotAllocate) {
+  const auto model = paper_model(2);
+  ControllerConfig cfg;
+  cfg.mode = GetParam();
+  Controller ctl(model, cfg);  // design time: may allocate
+  SimulatedRig rig(SimRigConfig{});
+  const auto ref = *paper_reference("multi");
+  const double Ts = cfg.sample_time_s;
+  std::array<double, 8> window{};
+  const int len = ctl.preview_samples() + 1;
+  ASSERT_LE(len, static_cast<int>(window.size()));
+  for (int i = 0; i < len; ++i) window[static_cast<size_t>(i)] = ref(i * Ts);
+  ctl.reset_steady_state(window[0]);
+  rig.reset_steady_state(ctl.last_voltage_V());
+
+  double checksum = 0.0;
+  long bad = 0;
+  const long before = g_allocations.load();
+  for (long k = 0; k < 10000; ++k) {
+    if (k % 997 == 500) ctl.set_mode(kAllModes[static_cast<size_t>((k / 997 + 1) % 4)]);
+    const double y = rig.measure();
+    const auto out = ctl.step(std::span<const double>(window.data(), static_cast<size_t>(len)), y);
+    rig.apply(out.voltage_V);
+    checksum += out.voltage_V + rig.true_displacement_um();
+    if (!std::isfinite(out.voltage_V) || out.status == ControlOutput::Status::invalid_input) ++bad;
+    for (int i = 0; i + 1 < len; ++i) window[static_cast<size_t>(i)] = window[static_cast<size_t>(i + 1)];
+    window[static_cast<size_t>(len - 1)] = ref(static_cast<double>(k + len) * Ts);
+    if (k == 5000) ctl.reset_steady_state(window[0]);  // noexcept, also on the RT path
+  }
+  const long after = g_allocations.load();
+  EXPECT_EQ(after - before, 0) << "allocations on the real-time path";
+  EXPECT_EQ(bad, 0);
+  EXPECT_TRUE(std::isfinite(checksum));
+}
+
+INSTANTIATE_TEST_SUITE_P(AllModes, NoAllocation, ::testing::ValuesIn(kAllModes),
+                         [](const auto& param_info) { return std::string(to_string(param_info.param)); });
+
+}  // namespace
+}  // namespace pvcgel::control
