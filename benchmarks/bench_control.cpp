@@ -25,7 +25,7 @@ void BM_ControllerStep(benchmark::State& state) {
   long k = 0;
   double y = 100.0;
   for (auto _ : state) {
-    for (size_t i = 0; i < preview.size(); ++i) preview[i] = ref((k + static_cast<long>(i)) * 1e-3);
+    for (size_t i = 0; i < preview.size(); ++i) preview[i] = ref(static_cast<double>(k + static_cast<long>(i)) * 1e-3);
     const auto out = ctl.step(preview, y);
     y = 0.999 * y + 0.001 * preview[0];
     benchmark::DoNotOptimize(out);

@@ -27,7 +27,7 @@ ClosedLoopRun run_closed_loop(SimulatedRig& rig, Controller& ctl, const MultiSin
   double sum_abs = 0.0, sum_sq = 0.0, sum_abs_true = 0.0, sum_noise = 0.0;
   long count = 0;
   for (long k = 0; k < n; ++k) {
-    const double t = k * Ts;
+    const double t = static_cast<double>(k) * Ts;
     const double y_true = rig.true_displacement_um();
     const double y = rig.measure();
     const auto out = ctl.step(std::span<const double>(window.data(), static_cast<size_t>(len)), y);
@@ -51,13 +51,14 @@ ClosedLoopRun run_closed_loop(SimulatedRig& rig, Controller& ctl, const MultiSin
       run.trace.d_hat.push_back(out.d_hat);
     }
     for (int i = 0; i + 1 < len; ++i) window[static_cast<size_t>(i)] = window[static_cast<size_t>(i + 1)];
-    window[static_cast<size_t>(len - 1)] = ref((k + len) * Ts);
+    window[static_cast<size_t>(len - 1)] = ref(static_cast<double>(k + len) * Ts);
   }
   if (count > 0) {
-    e.mean_abs_um = sum_abs / count;
-    e.rms_um = std::sqrt(sum_sq / count);
-    e.mean_abs_true_um = sum_abs_true / count;
-    e.noise_mean_abs_um = sum_noise / count;
+    const auto n_eval = static_cast<double>(count);
+    e.mean_abs_um = sum_abs / n_eval;
+    e.rms_um = std::sqrt(sum_sq / n_eval);
+    e.mean_abs_true_um = sum_abs_true / n_eval;
+    e.noise_mean_abs_um = sum_noise / n_eval;
   }
   return run;
 }

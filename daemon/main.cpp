@@ -86,9 +86,10 @@ int run(const Options& opt) {
   RealtimeReport report = lock_process_memory(cfg.realtime);
   auto stats = std::make_unique<LoopStatistics>();
   auto ring = std::make_unique<RecordRing>();
+  auto latest = std::make_unique<LatestRecord>();
   std::atomic<bool> started{false}, loop_done{false};
   std::thread rt([&] {
-    run_realtime_loop(loop, cfg.realtime, *stats, *ring, report, started);
+    run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
     loop_done.store(true, std::memory_order_release);
   });
   std::thread writer;
@@ -126,6 +127,9 @@ int run(const Options& opt) {
   std::uint64_t last_cycles = 0;
   auto last_ping = std::chrono::steady_clock::now();
   bool stop_sent = false;
+  LoopState last_state = LoopState::disabled;
+  FaultReason last_fault = FaultReason::none;
+  auto last_status = last_ping;
   while (!loop_done.load(std::memory_order_acquire)) {
     const timespec timeout{0, 20'000'000};
     const int sig = sigtimedwait(&signals, nullptr, &timeout);
@@ -136,6 +140,24 @@ int run(const Options& opt) {
       stop_sent = true;
     }
     const auto now = std::chrono::steady_clock::now();
+    // Log state changes as they happen (the RT thread itself never logs).
+    const CycleRecord& rec = latest->read();
+    if (rec.state != last_state || rec.fault != last_fault) {
+      std::fprintf(stderr, "pvcgeld: t = %.3f s: %s%s%s\n", rec.t_s, to_string(rec.state).data(),
+                   rec.fault != FaultReason::none ? ", fault " : "",
+                   rec.fault != FaultReason::none ? to_string(rec.fault).data() : "");
+      last_state = rec.state;
+      last_fault = rec.fault;
+    }
+    if (now - last_status > std::chrono::seconds(1)) {
+      char status[200];
+      std::snprintf(status, sizeof status, "STATUS=%s%s%s, u %.1f V, y %.2f um, r %.2f um, %llu overruns",
+                    to_string(rec.state).data(), rec.fault != FaultReason::none ? " " : "",
+                    rec.fault != FaultReason::none ? to_string(rec.fault).data() : "", rec.u_V, rec.y_um, rec.r_um,
+                    static_cast<unsigned long long>(stats->overruns.load(std::memory_order_relaxed)));
+      sd_notify(0, status);
+      last_status = now;
+    }
     if (watchdog && now - last_ping > std::chrono::microseconds(watchdog_usec / 2)) {
       // Only a loop that keeps cycling without an overrun storm feeds the watchdog.
       const auto cycles = stats->cycles.load(std::memory_order_relaxed);

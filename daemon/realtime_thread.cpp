@@ -49,7 +49,7 @@ RealtimeReport lock_process_memory(const RealtimeConfig& cfg) {
 }
 
 void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats, RecordRing& records,
-                       RealtimeReport& report, std::atomic<bool>& started) {
+                       LatestRecord& latest, RealtimeReport& report, std::atomic<bool>& started) {
   sched_param sp{};
   sp.sched_priority = cfg.priority;
   const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
@@ -82,6 +82,7 @@ void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatist
     stats.wakeup_latency.add(latency);
     const CycleRecord rec = loop.cycle(static_cast<float>(latency) * 1e-3f, consecutive_overruns);
     if (!records.push(rec)) stats.records_dropped.fetch_add(1, std::memory_order_relaxed);
+    latest.write(rec);
     const std::int64_t done = now_ns();
     stats.compute_time.add(done - woke);
     stats.cycles.fetch_add(1, std::memory_order_relaxed);

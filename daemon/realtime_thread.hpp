@@ -8,6 +8,7 @@
 #include "daemon/control_loop.hpp"
 #include "daemon/loop_statistics.hpp"
 #include "daemon/spsc_ring.hpp"
+#include "daemon/triple_buffer.hpp"
 
 namespace pvcgel::daemon {
 
@@ -31,14 +32,20 @@ struct RealtimeReport {
 /// Records from the loop to the recorder: 65 s of 1 kHz cycles.
 using RecordRing = SpscRing<CycleRecord, 1u << 16>;
 
+/// Latest cycle for status reports (systemd STATUS=, logs): the loop publishes
+/// every cycle, readers take the newest whenever they like.
+using LatestRecord = TripleBuffer<CycleRecord>;
+
 /// mlockall(MCL_CURRENT | MCL_FUTURE); call once from main before threads start.
 RealtimeReport lock_process_memory(const RealtimeConfig& cfg);
 
 /// Body of the loop thread: applies scheduling and affinity to itself, pre-faults
 /// its stack, then runs `loop.cycle()` every period until `loop.finished()`.
-/// Each record goes to `records` (a full ring is counted, never waited on).
+/// Each record goes to `records` (a full ring is counted, never waited on) and
+/// to `latest`.
 /// `report` receives the scheduling outcome before the first cycle.
 void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats,
-                       RecordRing& records, RealtimeReport& report, std::atomic<bool>& started);
+                       RecordRing& records, LatestRecord& latest, RealtimeReport& report,
+                       std::atomic<bool>& started);
 
 }  // namespace pvcgel::daemon

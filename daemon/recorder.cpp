@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <stdexcept>
 #include <thread>
 
@@ -10,6 +11,9 @@ namespace pvcgel::daemon {
 
 Recorder::Recorder(const std::string& path, const std::vector<std::pair<std::string, std::string>>& header)
     : path_(path) {
+  const auto parent = std::filesystem::path(path).parent_path();
+  std::error_code ec;
+  if (!parent.empty()) std::filesystem::create_directories(parent, ec);
   file_ = std::fopen(path.c_str(), "w");
   if (!file_) throw std::runtime_error("cannot open recording '" + path + "': " + std::strerror(errno));
   std::fprintf(file_, "# pvcgel-recording: 1\n");

@@ -42,6 +42,7 @@ struct FaultCase {
   FaultReason expected;
 };
 
+void PrintTo(const FaultCase& c, std::ostream* os) { *os << hal::to_string(c.injected); }
 class InjectedFault : public ::testing::TestWithParam<FaultCase> {};
 
 TEST_P(InjectedFault, RampsToZeroThenDisablesHighVoltage) {

@@ -119,6 +119,7 @@ struct E2EFault {
   const char* inject;
   const char* reason;
 };
+void PrintTo(const E2EFault& f, std::ostream* os) { *os << f.inject; }
 class PvcgeldFault : public ::testing::TestWithParam<E2EFault> {};
 
 TEST_P(PvcgeldFault, RightReasonZeroVoltsHighVoltageOffNoCrash) {
@@ -156,6 +157,7 @@ struct BadConfig {
   const char* toml_edit;  // appended to a copy of the sim config, or replacing a line
   const char* key;
 };
+void PrintTo(const BadConfig& c, std::ostream* os) { *os << c.name; }
 class PvcgeldBadConfig : public ::testing::TestWithParam<BadConfig> {};
 
 TEST_P(PvcgeldBadConfig, ExitsNonZeroNamingTheKey) {
