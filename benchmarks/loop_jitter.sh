@@ -38,12 +38,17 @@ daemon_stats() {
 
 printf "%-6s %-10s %8s %8s %8s %8s\n" load source p50_us p99_us p99.9_us max_us
 for load in idle stress; do
-  if [ $load = stress ]; then stress-ng --cpu "$(nproc)" --timeout $((3 * SECONDS_EACH))s >/dev/null 2>&1 & sleep 1; fi
-  read -r c50 c99 c999 cmax < <(cyclic_stats)
-  read -r d50 d99 d999 dmax < <(daemon_stats)
+  if [ $load = stress ]; then stress-ng --cpu "$(nproc)" --timeout $((SECONDS_EACH + 10))s >/dev/null 2>&1 & sleep 1; fi
+  # Both at once, so the host's noise over time is the same for both.
+  cyclic_stats > "$TMP/c.txt" &
+  cyclic_pid=$!
+  daemon_stats > "$TMP/dd.txt"
+  wait "$cyclic_pid"
+  read -r c50 c99 c999 cmax < "$TMP/c.txt"
+  read -r d50 d99 d999 dmax < "$TMP/dd.txt"
   printf "%-6s %-10s %8s %8s %8s %8s\n" $load cyclictest "$c50" "$c99" "$c999" "$cmax"
   printf "%-6s %-10s %8s %8s %8s %8s\n" $load pvcgeld "$d50" "$d99" "$d999" "$dmax"
   awk -v a="$d999" -v b="$c999" -v c="$dmax" -v d="$cmax" -v l=$load 'BEGIN {
     printf "%-6s ratio      p99.9 %.2f (target <= 1.25)   max %.2f (target <= 2)\n", l, a / (b > 0 ? b : 1), c / (d > 0 ? d : 1) }'
-  if [ $load = stress ]; then kill %1 2>/dev/null || true; wait 2>/dev/null || true; fi
+  if [ $load = stress ]; then pkill -f "stress-ng --cpu" 2>/dev/null || true; wait 2>/dev/null || true; fi
 done

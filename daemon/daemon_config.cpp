@@ -40,6 +40,7 @@ DaemonConfig load_daemon_config(const std::string& path) {
     cfg.realtime.cpu = loop.integer("cpu", cfg.realtime.cpu);
     if (cfg.realtime.cpu < -1 || cfg.realtime.cpu > 1023) throw ConfigError(loop.key("cpu"), "must be -1 (no affinity) or a CPU number");
     cfg.realtime.lock_memory = loop.boolean("lock_memory", cfg.realtime.lock_memory);
+    cfg.realtime.cpu_dma_latency_us = loop.integer("cpu_dma_latency_us", cfg.realtime.cpu_dma_latency_us);
     cfg.safety.overrun_fault_after = loop.integer("overrun_fault_after", cfg.safety.overrun_fault_after);
     if (cfg.safety.overrun_fault_after < 0) throw ConfigError(loop.key("overrun_fault_after"), "must be >= 0 (0: never fault)");
     loop.finish();

@@ -83,7 +83,7 @@ int run(const Options& opt) {
   sigaddset(&signals, SIGINT);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
-  RealtimeReport report = lock_process_memory(cfg.realtime);
+  RealtimeReport report = prepare_process(cfg.realtime);
   auto stats = std::make_unique<LoopStatistics>();
   auto ring = std::make_unique<RecordRing>();
   auto latest = std::make_unique<LatestRecord>();

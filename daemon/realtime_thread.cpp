@@ -2,7 +2,9 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <fcntl.h>
 #include <sys/mman.h>
+#include <unistd.h>
 #include <time.h>
 
 #include <cerrno>
@@ -33,17 +35,25 @@ void prefault_stack() noexcept {
 }
 }  // namespace
 
-RealtimeReport lock_process_memory(const RealtimeConfig& cfg) {
+RealtimeReport prepare_process(const RealtimeConfig& cfg) {
   RealtimeReport r;
   if (!cfg.lock_memory) {
     r.warnings += "memory locking disabled by configuration; ";
-    return r;
-  }
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
+  } else if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
     r.memory_locked = true;
   } else {
     r.warnings += std::string("mlockall failed (") + std::strerror(errno) +
                   "): page faults may stall the loop (needs CAP_IPC_LOCK or LimitMEMLOCK=infinity); ";
+  }
+  if (cfg.cpu_dma_latency_us >= 0) {
+    const int fd = open("/dev/cpu_dma_latency", O_WRONLY | O_CLOEXEC);
+    const std::int32_t value = cfg.cpu_dma_latency_us;
+    if (fd >= 0 && write(fd, &value, sizeof value) == static_cast<ssize_t>(sizeof value)) {
+      r.cpu_dma_latency_fd = fd;  // the request lasts while the file stays open
+    } else {
+      if (fd >= 0) close(fd);
+      r.warnings += "could not set /dev/cpu_dma_latency (deep CPU idle states may add wake-up latency); ";
+    }
   }
   return r;
 }

@@ -18,6 +18,9 @@ struct RealtimeConfig {
   int priority = 80;     ///< SCHED_FIFO priority, 1..99
   int cpu = -1;          ///< pin to this CPU; -1: no affinity
   bool lock_memory = true;
+  /// Written to /dev/cpu_dma_latency while the daemon runs (keeps CPUs out of
+  /// deep idle states, as cyclictest does); negative: leave it alone.
+  int cpu_dma_latency_us = 0;
 };
 
 /// What the process got from the kernel. Without privileges the loop still
@@ -26,6 +29,7 @@ struct RealtimeReport {
   bool memory_locked = false;
   bool realtime_scheduling = false;
   bool pinned = false;
+  int cpu_dma_latency_fd = -1;  ///< held open: closing it restores the default
   std::string warnings;  ///< empty when everything was granted
 };
 
@@ -36,8 +40,9 @@ using RecordRing = SpscRing<CycleRecord, 1u << 16>;
 /// every cycle, readers take the newest whenever they like.
 using LatestRecord = TripleBuffer<CycleRecord>;
 
-/// mlockall(MCL_CURRENT | MCL_FUTURE); call once from main before threads start.
-RealtimeReport lock_process_memory(const RealtimeConfig& cfg);
+/// mlockall(MCL_CURRENT | MCL_FUTURE) and the CPU DMA latency request; call
+/// once from main before threads start.
+RealtimeReport prepare_process(const RealtimeConfig& cfg);
 
 /// Body of the loop thread: applies scheduling and affinity to itself, pre-faults
 /// its stack, then runs `loop.cycle()` every period until `loop.finished()`.
