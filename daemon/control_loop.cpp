@@ -67,6 +67,13 @@ CycleRecord ControlLoop::cycle(float latency_us, int consecutive_overruns) noexc
 
   LoopState state = state_.load(std::memory_order_relaxed);
   const bool stop = stop_requested_.load(std::memory_order_relaxed);
+  if (reset_requested_.exchange(false, std::memory_order_relaxed) && state == LoopState::fault && !stop) {
+    // High voltage is already off and the output at 0 V; clear the fault and its counters.
+    state = LoopState::disabled;
+    pending_fault_ = FaultReason::none;
+    fault_.store(FaultReason::none, std::memory_order_relaxed);
+    same_reading_count_ = timeout_count_ = 0;
+  }
   switch (state) {
     case LoopState::disabled:
       u_V_ = 0.0;

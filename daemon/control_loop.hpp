@@ -79,6 +79,9 @@ class ControlLoop final {
   CycleRecord cycle(float latency_us, int consecutive_overruns) noexcept;
   /// Ask for a clean stop (ramp down, disable, finish). Any thread.
   void request_stop() noexcept { stop_requested_.store(true, std::memory_order_relaxed); }
+  /// Explicit reset: FAULT -> DISABLED (ignored in other states). With auto-start
+  /// the loop then re-arms and starts the trajectory again from its soft start. Any thread.
+  void request_reset() noexcept { reset_requested_.store(true, std::memory_order_relaxed); }
   /// True once the loop has come to rest (DISABLED after a stop, or FAULT when
   /// `exit_on_fault`) and the caller may end the thread.
   [[nodiscard]] bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
@@ -116,6 +119,7 @@ class ControlLoop final {
   std::atomic<LoopState> state_{LoopState::disabled};
   std::atomic<FaultReason> fault_{FaultReason::none};
   std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> reset_requested_{false};
   std::atomic<bool> finished_{false};
   std::array<double, 16> preview_{};
 };

@@ -81,6 +81,7 @@ int run(const Options& opt) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGTERM);
   sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGUSR1);  // reset a fault (until the DDS Command topic exists)
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   RealtimeReport report = prepare_process(cfg.realtime);
@@ -133,6 +134,10 @@ int run(const Options& opt) {
   while (!loop_done.load(std::memory_order_acquire)) {
     const timespec timeout{0, 20'000'000};
     const int sig = sigtimedwait(&signals, nullptr, &timeout);
+    if (sig == SIGUSR1) {
+      std::cerr << "pvcgeld: SIGUSR1: fault reset requested\n";
+      loop.request_reset();
+    }
     if ((sig == SIGTERM || sig == SIGINT) && !stop_sent) {
       std::cerr << "pvcgeld: " << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ": ramping down\n";
       sd_notify(0, "STOPPING=1");

@@ -91,6 +91,36 @@ INSTANTIATE_TEST_SUITE_P(
                       FaultCase{hal::SimFault::amplifier_fault, FaultReason::amplifier_fault}),
     [](const auto& p) { return std::string(hal::to_string(p.param.injected)); });
 
+TEST(ControlLoop, ExplicitResetLeavesFaultAndRunsAgain) {
+  Rig rig;
+  rig.loop->set_exit_on_fault(false);  // a service waits in FAULT for a reset
+  rig.run(3.0);
+  rig.sim.inject(hal::SimFault::sensor_nan);
+  auto r = rig.run(2.0);
+  ASSERT_EQ(r.state, LoopState::fault);
+  EXPECT_FALSE(rig.loop->finished());
+  r = rig.run(0.5);
+  EXPECT_EQ(r.state, LoopState::fault) << "a fault is left only by an explicit reset";
+  rig.sim.inject(hal::SimFault::none);
+  rig.loop->request_reset();
+  r = rig.run(0.01);
+  EXPECT_NE(r.state, LoopState::fault);
+  EXPECT_EQ(r.fault, FaultReason::none);
+  r = rig.run(5.0);
+  EXPECT_EQ(r.state, LoopState::running);
+  EXPECT_TRUE(rig.sim.health().high_voltage_enabled);
+  EXPECT_LT(std::abs(r.e_um), 2.5) << "tracking again after the soft start";
+}
+
+TEST(ControlLoop, ResetIsIgnoredOutsideFault) {
+  Rig rig;
+  const auto before = rig.run(3.0);
+  rig.loop->request_reset();
+  const auto r = rig.run(0.1);
+  EXPECT_EQ(r.state, LoopState::running);
+  EXPECT_GT(r.seq, before.seq);
+}
+
 TEST(ControlLoop, OverrunStormFaults) {
   Rig rig;
   rig.run(3.0);
