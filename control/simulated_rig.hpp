@@ -41,6 +41,17 @@ struct SimRigConfig {
     double fraction = 0.02;
     double time_constant_s = 20.0;
   } creep;
+
+  /// This rig with `truth` as its plant and every effect beyond the Hammerstein
+  /// model switched off (no hysteresis, creep, noise or quantisation; the I/O
+  /// delay and sample time stay): a rig that is exactly a model.
+  [[nodiscard]] SimRigConfig exactly(const HammersteinModel& model) const {
+    SimRigConfig c = *this;
+    c.truth = model;
+    c.hysteresis.enabled = c.creep.enabled = false;
+    c.noise_sigma_um = c.quantization_um = 0.0;
+    return c;
+  }
 };
 
 /// One simulated actuator with its laser sensor and amplifier. Deterministic

@@ -27,11 +27,7 @@ PaperBenchResult run_paper_bench(const PaperBenchOptions& o) {
       auto& mr = rr.modes[static_cast<size_t>(m)];
       mr = {m, run.errors, ctl.gains(m), ctl.margins(m), std::move(run.trace), 0.0};
       // The same loop on a rig that is exactly the model isolates the bandwidth-limited error.
-      control::SimRigConfig ideal = o.rig;
-      ideal.truth = o.model;
-      ideal.hysteresis.enabled = ideal.creep.enabled = false;
-      ideal.noise_sigma_um = ideal.quantization_um = 0.0;
-      control::SimulatedRig ideal_rig(ideal);
+      control::SimulatedRig ideal_rig(o.rig.exactly(o.model));
       control::Controller ideal_ctl(o.model, cc);
       mr.bandwidth_only_mean_um =
           control::run_closed_loop(ideal_rig, ideal_ctl, ref, o.duration_s, o.settle_s, false).errors.mean_abs_true_um;

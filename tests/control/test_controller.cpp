@@ -233,13 +233,7 @@ INSTANTIATE_TEST_SUITE_P(AllPairs, BumplessSwitch, ::testing::ValuesIn(all_switc
 // Disturbance observer in closed loop.
 
 TEST(Controller, DobLoopOnAPerfectModelHasNoSteadyStateError) {
-  SimRigConfig rc;
-  rc.truth = paper_model(2);
-  rc.hysteresis.enabled = false;
-  rc.creep.enabled = false;
-  rc.noise_sigma_um = 0.0;
-  rc.quantization_um = 0.0;
-  SimulatedRig rig(rc);
+  SimulatedRig rig(SimRigConfig{}.exactly(paper_model(2)));
   ControllerConfig cfg;
   cfg.mode = ControllerMode::inverse_pid_dob;
   Controller ctl(paper_model(2), cfg);
@@ -269,13 +263,7 @@ TEST(Controller, DobLoopOnAPerfectModelHasNoSteadyStateError) {
 }
 
 TEST(Controller, DobLoopOnAPerfectModelTracksAConstantReference) {
-  SimRigConfig rc;
-  rc.truth = paper_model(2);
-  rc.hysteresis.enabled = false;
-  rc.creep.enabled = false;
-  rc.noise_sigma_um = 0.0;
-  rc.quantization_um = 0.0;
-  SimulatedRig rig(rc);
+  SimulatedRig rig(SimRigConfig{}.exactly(paper_model(2)));
   ControllerConfig cfg;
   cfg.mode = ControllerMode::inverse_pid_dob;
   Controller ctl(paper_model(2), cfg);
@@ -290,14 +278,9 @@ TEST(Controller, DobLoopOnAPerfectModelTracksAConstantReference) {
 TEST(Controller, DobEstimatesAnInputGainMismatch) {
   // Truth 20% stronger than the model in f: a static input disturbance d = 0.2 f(u). The
   // observer reports it and the loop still settles on the reference.
-  SimRigConfig rc;
   const auto f2 = paper_model(2).f;
-  rc.truth = {OddPolynomial({1.2 * f2.coefficient(1), 1.2 * f2.coefficient(2)}), paper_model(2).G};
-  rc.hysteresis.enabled = false;
-  rc.creep.enabled = false;
-  rc.noise_sigma_um = 0.0;
-  rc.quantization_um = 0.0;
-  SimulatedRig rig(rc);
+  SimulatedRig rig(SimRigConfig{}.exactly(
+      {OddPolynomial({1.2 * f2.coefficient(1), 1.2 * f2.coefficient(2)}), paper_model(2).G}));
   ControllerConfig cfg;
   cfg.mode = ControllerMode::inverse_pid_dob;
   Controller ctl(paper_model(2), cfg);

@@ -15,15 +15,7 @@ namespace {
 // A deterministic, varying voltage sequence within 0..1000 V.
 double voltage_at(long k) { return 400.0 + 150.0 * std::sin(0.002 * static_cast<double>(k)) + 5.0 * std::sin(0.3 * static_cast<double>(k)); }
 
-SimRigConfig ideal_config() {
-  SimRigConfig c;
-  c.truth = paper_model(2);
-  c.hysteresis.enabled = false;
-  c.creep.enabled = false;
-  c.noise_sigma_um = 0.0;
-  c.quantization_um = 0.0;
-  return c;
-}
+SimRigConfig ideal_config() { return SimRigConfig{}.exactly(paper_model(2)); }
 
 TEST(SimulatedRig, SameSeedSameMeasurementsDifferentSeedDifferent) {
   SimRigConfig c;
