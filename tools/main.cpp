@@ -4,6 +4,7 @@
 
 #include "control/config_error.hpp"
 #include "tools/bench_command.hpp"
+#include "tools/ident_command.hpp"
 #include "tools/show_command.hpp"
 
 int main(int argc, char** argv) {
@@ -11,6 +12,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   pvcgel::tools::add_bench_command(app);
   pvcgel::tools::add_show_command(app);
+  pvcgel::tools::add_ident_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

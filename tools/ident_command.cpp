@@ -1,0 +1,609 @@
+#include "tools/ident_command.hpp"
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <sstream>
+
+#include "control/config_error.hpp"
+#include "control/config_parser.hpp"
+#include "tools/gnuplot.hpp"
+#include "tools/recording.hpp"
+
+namespace pvcgel::tools {
+
+namespace fs = std::filesystem;
+using namespace control::identification;
+using control::HammersteinModel;
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+/// Process CPU time (what the speed target is about, not wall time).
+double cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+std::string fmt(const char* f, auto... v) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, f, v...);
+  return buf;
+}
+
+std::string join(const std::vector<double>& v) {
+  std::string s = "[";
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + fmt("%.10g", v[i]);
+  return s + "]";
+}
+
+void write_file(const fs::path& p, const std::string& s) {
+  std::ofstream f(p);
+  if (!f) throw std::runtime_error("cannot write " + p.string());
+  f << s;
+  if (!f.flush()) throw std::runtime_error("write failed: " + p.string());
+}
+
+std::string roots_text(const Eigen::VectorXcd& r) {
+  std::string s;
+  for (Eigen::Index i = 0; i < r.size(); ++i) {
+    s += i ? ", " : "";
+    s += std::abs(r(i).imag()) < 1e-12 ? fmt("%.4f", r(i).real()) : fmt("%.4f%+.4fj", r(i).real(), r(i).imag());
+  }
+  return s.empty() ? "none" : s;
+}
+
+std::vector<std::complex<double>> sorted_roots(const Eigen::VectorXcd& r) {
+  std::vector<std::complex<double>> v(r.data(), r.data() + r.size());
+  std::sort(v.begin(), v.end(), [](auto a, auto b) { return a.real() < b.real(); });
+  return v;
+}
+
+/// A record kept for time-domain validation.
+struct Validation {
+  std::string label;
+  SineRecord record;
+  double settle_s = 10.0;
+  bool held_out = true;
+  std::vector<std::vector<double>> prediction;  ///< per n (index n - 1)
+  std::vector<PredictionMetrics> metrics;
+};
+
+bool is_validation_target(const IdentArgs& a, double A, double B, double f) {
+  if (std::abs(A - a.validation_amplitude_V) > a.options.regime_tolerance_V ||
+      std::abs(B - a.validation_bias_V) > a.options.regime_tolerance_V)
+    return false;
+  return std::any_of(a.validation_frequencies_Hz.begin(), a.validation_frequencies_Hz.end(),
+                     [&](double vf) { return std::abs(f - vf) <= 0.02 * vf; });
+}
+
+double header_number(const Recording& r, const std::string& key, double fallback) {
+  const auto it = r.header.find(key);
+  if (it == r.header.end()) return fallback;
+  char* end = nullptr;
+  const double v = std::strtod(it->second.c_str(), &end);
+  return end != it->second.c_str() && std::isfinite(v) ? v : fallback;
+}
+
+SineRecord to_record(const Recording& r) {
+  SineRecord s;
+  s.point.amplitude_V = s.point.bias_V = s.point.frequency_Hz = NAN;  // estimated from u, not read
+  s.sample_time_s = r.sample_time_s;
+  s.t_s = r.col("t_s");
+  s.u_V = r.col("u_V");
+  s.y_um = r.col("y_um");
+  return s;
+}
+
+std::vector<fs::path> csv_files(const fs::path& dir) {
+  if (!fs::is_directory(dir)) throw std::runtime_error("--from: '" + dir.string() + "' is not a directory");
+  std::vector<fs::path> v;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.is_regular_file() && e.path().extension() == ".csv") v.push_back(e.path());
+  std::sort(v.begin(), v.end());
+  if (v.empty()) throw std::runtime_error("--from: no *.csv recordings in '" + dir.string() + "'");
+  return v;
+}
+
+void plot_bode(const IdentificationResult& r, const fs::path& dir) {
+  const fs::path meas = dir / "bode_measured.dat", model = dir / "bode_model.dat";
+  std::ofstream m(meas);
+  m << "# f_Hz |H| sigma phase_deg  (reference regime, sampling delays removed)\n";
+  for (size_t i : r.reference) {
+    const auto& p = r.points[i];
+    const auto h = r.continuous[i];
+    m << p.frequency_Hz << ' ' << std::abs(h) << ' ' << p.response_sigma << ' ' << std::arg(h) * 180 / kPi << '\n';
+  }
+  std::ofstream g(model);
+  for (double f : log_spaced(0.05, 20.0, 200)) {
+    const auto h = r.G_fit.G({0.0, 2 * kPi * f});
+    g << f << ' ' << std::abs(h) << ' ' << std::arg(h) * 180 / kPi << '\n';
+  }
+  m.close();
+  g.close();
+  std::ostringstream gp;
+  gp << "set terminal pngcairo size 900,900 font ',10'\nset output '" << (dir / "bode.png").string() << "'\n"
+     << "set multiplot layout 2,1 title 'Frequency response at the reference regime: measured vs identified G(s) (like Fig. 6)'\n"
+     << "set logscale x\nset grid\nset xlabel 'frequency (Hz)'\nset logscale y\nset ylabel 'magnitude (um/V)'\n"
+     << "plot '" << meas.string() << "' u 1:2:3 w yerrorbars pt 7 lc rgb 'black' t 'measured', '" << model.string()
+     << "' u 1:2 w l lw 2 lc rgb '#1f77b4' t 'G(s)'\nunset logscale y\nset ylabel 'phase (deg)'\n"
+     << "plot '" << meas.string() << "' u 1:4 w p pt 7 lc rgb 'black' t 'measured', '" << model.string()
+     << "' u 1:3 w l lw 2 lc rgb '#1f77b4' t 'G(s)'\nunset multiplot\n";
+  write_file(dir / "bode.gp", gp.str());
+  run_gnuplot(dir / "bode.gp");
+}
+
+void plot_gains(const IdentificationResult& r, const fs::path& dir) {
+  // Distinct amplitudes and biases of the valid points (rounded to 1 V).
+  std::map<long, int> amps, biases;
+  for (size_t i : r.used) {
+    amps[std::lround(r.points[i].amplitude_V)] = 0;
+    biases[std::lround(r.points[i].bias_V)] = 0;
+  }
+  const char* colors[] = {"#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"};
+  for (const auto& cand : r.f_fit.candidates) {
+    const int n = cand.terms;
+    const auto model = r.model(n);
+    std::ostringstream gp;
+    const fs::path png = dir / ("gain_n" + std::to_string(n) + ".png");
+    gp << "set terminal pngcairo size 1500,500 font ',10'\nset output '" << png.string() << "'\n"
+       << "set multiplot layout 1," << biases.size() << " title 'Overall gain N(A,B)|G(jw)|: measured (M, points) vs model (E, lines), n = "
+       << n << " (like Figs. 7-9)'\nset logscale xy\nset grid\nset xlabel 'frequency (Hz)'\nset ylabel 'gain (um/V)'\nset key bottom left\n";
+    for (const auto& [B, unused] : biases) {
+      const fs::path dat = dir / ("gain_n" + std::to_string(n) + "_B" + std::to_string(B) + ".dat");
+      std::ofstream d(dat);
+      int ai = 0;
+      std::string plot = "plot ";
+      for (const auto& [A, unused2] : amps) {
+        d << "# A = " << A << " measured\n";
+        for (size_t i : r.used)
+          if (std::lround(r.points[i].amplitude_V) == A && std::lround(r.points[i].bias_V) == B)
+            d << r.points[i].frequency_Hz << ' ' << std::abs(r.continuous[i]) << '\n';
+        d << "\n\n# A = " << A << " model\n";
+        for (double f : log_spaced(0.05, 20.0, 120))
+          d << f << ' ' << overall_gain(model, static_cast<double>(A), static_cast<double>(B), 2 * kPi * f) << '\n';
+        d << "\n\n";
+        const char* c = colors[ai % 6];
+        plot += std::string(ai ? ", " : "") + "'" + dat.string() + "' index " + std::to_string(2 * ai) +
+                " w p pt 7 lc rgb '" + c + "' t '" + std::to_string(A) + " V M', '' index " +
+                std::to_string(2 * ai + 1) + " w l lc rgb '" + c + "' t '" + std::to_string(A) + " V E'";
+        ++ai;
+      }
+      gp << "set title 'bias " << B << " V'\n" << plot << "\n";
+    }
+    gp << "unset multiplot\n";
+    const fs::path script = dir / ("gain_n" + std::to_string(n) + ".gp");
+    write_file(script, gp.str());
+    run_gnuplot(script);
+  }
+}
+
+void plot_validation(const std::vector<Validation>& vals, int max_n, const fs::path& dir) {
+  if (vals.empty()) return;
+  const char* colors[] = {"#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"};
+  std::ostringstream gp;
+  gp << "set terminal pngcairo size 1100," << 420 * vals.size() << " font ',10'\nset output '"
+     << (dir / "validation.png").string() << "'\nset multiplot layout " << vals.size()
+     << ",1 title 'Time-domain validation: measured vs model prediction from the recorded u (like Fig. 10)'\n"
+     << "set grid\nset xlabel 't (s)'\nset ylabel 'displacement (um)'\nset key outside right\n";
+  for (size_t v = 0; v < vals.size(); ++v) {
+    const auto& val = vals[v];
+    const fs::path dat = dir / ("validation_" + std::to_string(v) + ".dat");
+    std::ofstream d(dat);
+    const auto& t = val.record.t_s;
+    // The last two periods (at most 25 s), like the paper's figure.
+    const double f = val.record.point.frequency_Hz > 0 ? val.record.point.frequency_Hz : 1.0;
+    const double from = t.back() - std::min(2.0 / f, 25.0);
+    for (size_t k = 0; k < t.size(); ++k) {
+      if (t[k] < from) continue;
+      d << t[k] << ' ' << val.record.y_um[k];
+      for (const auto& p : val.prediction) d << ' ' << p[k];
+      d << '\n';
+    }
+    gp << "set title '" << val.label << (val.held_out ? " (held out)" : " (also in the fit data)") << "'\nplot '"
+       << dat.string() << "' u 1:2 w l lw 2 lc rgb 'black' t 'measured'";
+    for (int n = 1; n <= max_n; ++n)
+      gp << ", '' u 1:" << 2 + n << " w l lc rgb '" << colors[(n - 1) % 6] << "' t 'model n = " << n << "'";
+    gp << "\n";
+  }
+  gp << "unset multiplot\n";
+  write_file(dir / "validation.gp", gp.str());
+  run_gnuplot(dir / "validation.gp");
+}
+
+}  // namespace
+
+std::string model_toml(const HammersteinModel& m, const std::string& comment) {
+  std::string s;
+  std::istringstream in(comment);
+  for (std::string line; std::getline(in, line);) s += "# " + line + "\n";
+  s += "[model]\npoly = " + join(m.f.coefficients()) + "\nG_num = " + join(m.G.num()) + "\nG_den = " + join(m.G.den()) + "\n";
+  return s;
+}
+
+void write_sine_recording(const fs::path& path, const SineRecord& r,
+                          const std::vector<std::pair<std::string, std::string>>& header) {
+  if (path.has_parent_path()) fs::create_directories(path.parent_path());
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw std::runtime_error("cannot write recording '" + path.string() + "'");
+  std::fprintf(f, "# pvcgel-recording: 1\n");
+  for (const auto& [k, v] : header) std::fprintf(f, "# %s: %s\n", k.c_str(), v.c_str());
+  std::fprintf(f, "# convention: row k holds y_um measured at the start of cycle k (t_s) and the u_V then "
+                  "applied and held until cycle k+1 (zero-order hold)\n");
+  std::fprintf(f, "t_s,u_V,y_um,r_um,e_um,d_hat,mode,state,fault,hv,latency_us\n");
+  for (size_t k = 0; k < r.t_s.size(); ++k)
+    std::fprintf(f, "%.4f,%.6f,%.4f,nan,nan,0,open_loop,RUNNING,none,1,0.0\n", r.t_s[k], r.u_V[k], r.y_um[k]);
+  const bool ok = std::fflush(f) == 0;
+  std::fclose(f);
+  if (!ok) throw std::runtime_error("writing recording '" + path.string() + "' failed");
+}
+
+IdentOutcome run_ident(const IdentArgs& a) {
+  if (a.rig)
+    throw std::runtime_error(
+        "--rig: identification on a running pvcgeld is not available until the DDS interface exists. Use --sim, or "
+        "--from DIR with recordings (pvcgeld format) of open-loop sine voltages u = B + A sin(2 pi f t), one per file");
+  if (static_cast<int>(a.sim) + static_cast<int>(!a.from.empty()) != 1)
+    throw std::runtime_error("give exactly one of --sim, --from DIR or --rig");
+  if (!a.save_recordings.empty() && !a.sim) throw std::runtime_error("--save-recordings needs --sim");
+
+  const bool progress = !a.quiet;
+  std::vector<FrequencyResponsePoint> points;
+  std::vector<Validation> validations;
+  double cpu = 0.0;
+  double Ts = a.options.sample_time_s;
+  std::optional<control::SimRigConfig> rig_cfg;
+  std::ostringstream out;
+
+  if (a.sim) {
+    control::SimRigConfig cfg;
+    if (!a.config.empty()) {
+      toml::table root;
+      try {
+        root = toml::parse_file(a.config);
+      } catch (const toml::parse_error& e) {
+        throw std::runtime_error(a.config + ": " + std::string(e.description()));
+      }
+      cfg = control::parse_configuration(root, a.config, {"loop", "hal", "safety", "run"}).sim;
+    }
+    cfg.seed = a.seed;
+    if (a.ideal) {
+      cfg.hysteresis.enabled = false;
+      cfg.creep.enabled = false;
+    }
+    Ts = cfg.sample_time_s;
+    rig_cfg = cfg;
+    const auto plan = ExcitationPlan::from_grid(a.grid, Ts);
+    control::SimulatedRig rig(cfg);
+    out << "Simulated rig: truth f = " << join(cfg.truth.f.coefficients()) << ", G = " << cfg.truth.G.to_string()
+        << ", I/O delay " << cfg.io_delay_samples << " sample(s), noise " << cfg.noise_sigma_um << " um, hysteresis "
+        << (cfg.hysteresis.enabled ? "on" : "off") << ", creep " << (cfg.creep.enabled ? "on" : "off") << "\n";
+    out << "Plan: " << plan.points().size() << " sine experiments, " << fmt("%.0f", plan.total_duration_s())
+        << " s of rig time (settling " << a.grid.settle_s << " s each)\n";
+    size_t i = 0;
+    for (const auto& p : plan.points()) {
+      ++i;
+      const auto rec = run_sine_experiment(rig, p);
+      const std::string label = fmt("A%03.0f_B%03.0f_f%07.4fHz", p.amplitude_V, p.bias_V, p.frequency_Hz);
+      if (!a.save_recordings.empty())
+        write_sine_recording(fs::path(a.save_recordings) / (label + ".csv"), rec,
+                             {{"rate_hz", fmt("%.0f", 1.0 / Ts)},
+                              {"hal_backend", "sim"},
+                              {"trajectory", fmt("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz)},
+                              {"mode", "open_loop"},
+                              {"settle_s", fmt("%g", p.settle_s)}});
+      ExtractionOptions eo;
+      eo.settle_s = p.settle_s;
+      eo.min_periods = a.min_periods;
+      const double c0 = cpu_s();
+      points.push_back(extract_frequency_response(rec.t_s, rec.u_V, rec.y_um, eo, label));
+      cpu += cpu_s() - c0;
+      if (progress)
+        std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s simulated, |H| = %.5f um/V%s\n", i,
+                     plan.points().size(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.duration_s(),
+                     points.back().gain(), points.back().valid ? "" : (" FLAGGED: " + points.back().problem).c_str());
+    }
+    // Held-out experiments: separate runs (other noise) of the paper's Fig. 10 settings.
+    control::SimRigConfig vcfg = cfg;
+    vcfg.seed = a.seed + 1000;
+    control::SimulatedRig vrig(vcfg);
+    for (double f : a.validation_frequencies_Hz) {
+      SinePoint p{a.validation_amplitude_V, a.validation_bias_V, f, a.grid.settle_s,
+                  std::max(ExcitationPlan::kMinPeriods, static_cast<int>(std::ceil(10.0 * f)))};
+      (void)ExcitationPlan({p}, Ts);  // validates the voltage range
+      Validation v;
+      v.label = fmt("A = %.0f V, B = %.0f V, f = %g Hz", p.amplitude_V, p.bias_V, f);
+      v.record = run_sine_experiment(vrig, p);
+      v.settle_s = p.settle_s;
+      if (!a.save_recordings.empty())
+        write_sine_recording(fs::path(a.save_recordings) / "validation" /
+                                 fmt("A%03.0f_B%03.0f_f%07.4fHz.csv", p.amplitude_V, p.bias_V, f),
+                             v.record, {{"rate_hz", fmt("%.0f", 1.0 / Ts)}, {"hal_backend", "sim"},
+                                        {"trajectory", fmt("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, f)},
+                                        {"mode", "open_loop"}, {"settle_s", fmt("%g", p.settle_s)}});
+      validations.push_back(std::move(v));
+    }
+    if (!a.save_recordings.empty()) out << "Recordings written to " << a.save_recordings << "/ (held-out ones in validation/)\n";
+  } else {
+    const auto files = csv_files(a.from);
+    out << "Recordings: " << files.size() << " in " << a.from << "\n";
+    double read_s = 0.0;
+    std::optional<double> Ts_seen;
+    size_t i = 0;
+    for (const auto& file : files) {
+      ++i;
+      const double c0 = cpu_s();
+      Recording rec;
+      try {
+        rec = read_recording(file.string());
+      } catch (const std::exception& e) {
+        // Unusable file (gaps, non-uniform time, ...): flagged, excluded, reported.
+        FrequencyResponsePoint bad;
+        bad.source = file.filename().string();
+        bad.problem = e.what();
+        points.push_back(bad);
+        if (progress) std::fprintf(stderr, "[%zu/%zu] %s: FLAGGED: %s\n", i, files.size(), bad.source.c_str(), e.what());
+        continue;
+      }
+      read_s += cpu_s() - c0;
+      if (Ts_seen && std::abs(*Ts_seen - rec.sample_time_s) > 1e-3 * *Ts_seen)
+        throw std::runtime_error(file.string() + ": sample time " + fmt("%g", rec.sample_time_s) +
+                                 " s differs from the other recordings' " + fmt("%g", *Ts_seen) + " s");
+      Ts_seen = rec.sample_time_s;
+      ExtractionOptions eo;
+      eo.settle_s = header_number(rec, "settle_s", a.settle_s);
+      eo.min_periods = a.min_periods;
+      const double c1 = cpu_s();
+      points.push_back(extract_frequency_response(rec.col("t_s"), rec.col("u_V"), rec.col("y_um"), eo,
+                                                  file.filename().string()));
+      cpu += cpu_s() - c1;
+      const auto& p = points.back();
+      if (progress)
+        std::fprintf(stderr, "[%zu/%zu] %s: A = %.1f V, B = %.1f V, f = %.4f Hz, |H| = %.5f um/V%s\n", i, files.size(),
+                     p.source.c_str(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.gain(),
+                     p.valid ? "" : (" FLAGGED: " + p.problem).c_str());
+      if (p.valid && is_validation_target(a, p.amplitude_V, p.bias_V, p.frequency_Hz)) {
+        Validation v;
+        v.label = p.source;
+        v.record = to_record(rec);
+        v.record.point.frequency_Hz = p.frequency_Hz;
+        v.settle_s = eo.settle_s;
+        v.held_out = false;
+        validations.push_back(std::move(v));
+      }
+    }
+    if (Ts_seen) Ts = *Ts_seen;
+    out << fmt("Reading the recordings took %.2f s CPU (not counted below)\n", read_s);
+    // Held-out recordings, if there are any, replace the in-fit stand-ins.
+    fs::path vdir = a.validation_dir.empty() ? fs::path(a.from) / "validation" : fs::path(a.validation_dir);
+    if (fs::is_directory(vdir)) {
+      validations.clear();
+      for (const auto& file : csv_files(vdir)) {
+        const auto rec = read_recording(file.string());
+        Validation v;
+        v.label = file.filename().string();
+        v.record = to_record(rec);
+        v.settle_s = header_number(rec, "settle_s", a.settle_s);
+        const auto est = estimate_sine(v.record.t_s, v.record.u_V, 0, v.record.t_s.size());
+        v.record.point.frequency_Hz = est.frequency_Hz;
+        validations.push_back(std::move(v));
+      }
+    } else if (!a.validation_dir.empty()) {
+      throw std::runtime_error("--validation-dir: '" + a.validation_dir + "' is not a directory");
+    }
+  }
+
+  IdentificationOptions io = a.options;
+  io.sample_time_s = Ts;
+  const double c0 = cpu_s();
+  IdentificationResult r = identify(points, io);
+  cpu += cpu_s() - c0;
+
+  // --- frequency responses
+  out << "\nFrequency responses (fundamental; phase and |H| with the " << io.io_delay_samples
+      << "-sample I/O delay and the ZOH removed; sigma from the per-period spread; H2, H3 relative to H1)\n";
+  out << "   A (V)   B (V)    f (Hz)  periods   |H| (um/V)  sigma (%)  phase (deg)   DC (um)   H2 (%)  H3 (%)  status\n";
+  size_t flagged = 0;
+  for (size_t i = 0; i < r.points.size(); ++i) {
+    const auto& p = r.points[i];
+    if (!p.valid && p.frequency_Hz == 0.0) {
+      out << "  " << p.source << ": FLAGGED, excluded: " << p.problem << "\n";
+      ++flagged;
+      continue;
+    }
+    const auto h = r.continuous[i];
+    const double h1 = p.harmonic_um.empty() ? NAN : p.harmonic_um[0];
+    out << fmt("  %6.1f  %6.1f  %8.4f  %7d  %11.6f  %9.3f  %11.2f  %8.3f  %7.3f %7.3f  ", p.amplitude_V, p.bias_V,
+               p.frequency_Hz, p.periods, std::abs(h), 100.0 * p.response_sigma / std::max(p.gain(), 1e-300),
+               std::arg(h) * 180 / kPi, p.dc_um, p.harmonic_um.size() > 1 ? 100 * p.harmonic_um[1] / h1 : NAN,
+               p.harmonic_um.size() > 2 ? 100 * p.harmonic_um[2] / h1 : NAN);
+    if (p.valid) out << (std::find(r.reference.begin(), r.reference.end(), i) != r.reference.end() ? "ref" : "ok");
+    else {
+      out << "FLAGGED, excluded: " << p.problem;
+      ++flagged;
+    }
+    out << "\n";
+  }
+  out << r.used.size() << " valid points, " << flagged << " flagged and excluded, " << r.reference.size()
+      << " at the reference regime A = " << io.reference_amplitude_V << " V, B = " << io.reference_bias_V << " V\n";
+
+  // --- G
+  const auto& g = r.G_fit;
+  out << "\nG(s) (numerator order " << io.G.numerator_order << ", denominator order " << io.G.denominator_order
+      << "; Levy/SK " << g.sk_iterations << " iterations, fit " << fmt("%.2f", g.sk_fit_percent)
+      << "%, then Levenberg-Marquardt: " << g.lm_status << ")\n";
+  out << "  G(s) = " << g.G.to_string() << "\n";
+  out << fmt("  fit %.3f%% (tfest measure), max relative error %.3f%%, DC gain %.6g um/V\n", g.fit_percent,
+             100 * g.max_relative_error, g.G.dc_gain());
+  out << "  poles: " << roots_text(g.poles) << "\n  zeros: " << roots_text(g.zeros) << "\n";
+  out << "  normalisation: " << kNormalisation << "\n";
+
+  // --- f
+  out << "\nNonlinearity f (paper eq. (10), d = measured gain / |G(jw)| per valid grid point)\n";
+  out << "   n   ||Hc - d||   relative   vs n-1    monotone on [0, " << io.f.voltage_max_V << "] V   c\n";
+  for (const auto& c : r.f_fit.candidates) {
+    std::string vs = "";
+    if (c.terms > 1) vs = fmt("%+.1f%%", 100.0 * (c.residual_norm / r.f_fit.candidate(c.terms - 1).residual_norm - 1.0));
+    out << fmt("  %2d  %11.5g  %9.5f  %8s    %-28s", c.terms, c.residual_norm, c.relative_residual, vs.c_str(),
+               c.monotone() ? "yes" : fmt("no: turns over at %.1f V", *c.turnover_V).c_str())
+        << join(c.c) << "\n";
+  }
+  out << "  chosen n = " << r.f_fit.chosen_terms << ": " << r.f_fit.rule << "\n";
+
+  // --- truth (simulation only)
+  if (rig_cfg) {
+    const auto& truth = rig_cfg->truth;
+    out << "\nAgainst the simulated truth (f = " << join(truth.f.coefficients()) << ", G = " << truth.G.to_string() << ")\n";
+    const auto p = sorted_roots(g.poles), pt = sorted_roots(truth.G.poles());
+    for (size_t i = 0; i < std::min(p.size(), pt.size()); ++i)
+      out << fmt("  pole %.4f vs %.4f: %.3f%%\n", p[i].real(), pt[i].real(), 100 * std::abs(p[i] - pt[i]) / std::abs(pt[i]));
+    const auto z = sorted_roots(g.zeros), zt = sorted_roots(truth.G.zeros());
+    for (size_t i = 0; i < std::min(z.size(), zt.size()); ++i)
+      out << fmt("  zero %.4f vs %.4f: %.3f%%\n", z[i].real(), zt[i].real(), 100 * std::abs(z[i] - zt[i]) / std::abs(zt[i]));
+    const double Nref = truth.f.describing_function(io.reference_amplitude_V, io.reference_bias_V);
+    std::vector<double> ct = truth.f.coefficients();
+    for (auto& c : ct) c *= Nref;
+    out << "  truth in this normalisation: c = " << join(ct) << " (c_true x N_true(A_ref, B_ref) = " << fmt("%.5g", Nref)
+        << "), G_true / " << fmt("%.5g", Nref) << "\n";
+    for (const auto& c : r.f_fit.candidates) {
+      const auto m = r.model(c.terms);
+      double worst = 0.0;
+      for (size_t i : r.used) {
+        const auto& q = r.points[i];
+        const double gt = control::identification::overall_gain(truth, q.amplitude_V, q.bias_V, q.omega_rad_s());
+        worst = std::max(worst, std::abs(control::identification::overall_gain(m, q.amplitude_V, q.bias_V, q.omega_rad_s()) - gt) / gt);
+      }
+      out << fmt("  n = %d: max |overall gain N(A,B)|G(jw)| - truth's| over the grid: %.3f%%%s\n", c.terms, 100 * worst,
+                 c.terms == truth.f.terms() ? "  (n of the truth)" : "");
+    }
+  }
+
+  // --- validation
+  const int max_n = static_cast<int>(r.f_fit.candidates.size());
+  if (!validations.empty()) {
+    out << "\nTime-domain validation (model driven by the recorded u with ZOH and the I/O delay, from its steady state "
+           "at u[0]; metrics after the settling time)\n";
+    for (auto& v : validations) {
+      const auto begin = static_cast<size_t>(std::llround(v.settle_s / v.record.sample_time_s));
+      if (begin >= v.record.t_s.size()) continue;
+      out << "  " << v.label << (v.held_out ? " (held out)" : " (also in the fit data: no held-out recordings)") << "\n";
+      for (int n = 1; n <= max_n; ++n) {
+        v.prediction.push_back(simulate_hammerstein(r.model(n), v.record.u_V, v.record.sample_time_s, io.io_delay_samples));
+        v.metrics.push_back(prediction_metrics(v.record.y_um, v.prediction.back(), begin, v.record.t_s.size()));
+        const auto& m = v.metrics.back();
+        out << fmt("    n = %d: NRMSE %.4f, rms %.3f um, max %.3f um, mean offset %+.3f um\n", n, m.nrmse,
+                   m.rms_error_um, m.max_error_um, m.mean_error_um);
+      }
+    }
+  }
+  out << fmt("\nCPU time for extraction and fits (%zu points): %.3f s\n", r.points.size(), cpu);
+
+  const std::string problem = g.control_problem();
+  if (!problem.empty()) out << "\nREFUSED: " << problem << "\n";
+
+  IdentOutcome outcome{std::move(r), "", cpu, false};
+  const auto& res = outcome.result;
+  if (problem.empty() && !a.out.empty()) {
+    const auto model = res.chosen_model();
+    std::string comment = "pvcgel ident: " + (a.sim ? std::string("simulated rig") : "recordings in " + a.from) +
+                          "\nn = " + std::to_string(res.f_fit.chosen_terms) + ": " + res.f_fit.rule +
+                          "\nnormalisation: N(A_ref = " + fmt("%g", io.reference_amplitude_V) + " V, B_ref = " +
+                          fmt("%g", io.reference_bias_V) + " V) = 1 for the fit of G; f carries the scale";
+    if (const auto turn = model.f.first_turnover(1000.0))
+      comment += fmt("\nWARNING: f turns over at %.1f V: set controller.voltage_max_V below that", *turn);
+    const std::string text = model_toml(model, comment);
+    // The file must be what the daemon accepts: parse it back before writing.
+    try {
+      (void)control::parse_model(toml::parse(text), a.out);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("internal: the model file does not parse back: ") + e.what());
+    }
+    if (fs::path(a.out).has_parent_path()) fs::create_directories(fs::path(a.out).parent_path());
+    write_file(a.out, text);
+    outcome.model_written = true;
+    out << "wrote " << a.out << " (n = " << res.f_fit.chosen_terms << ")\n";
+  }
+
+  if (!a.report.empty()) {
+    const fs::path dir(a.report);
+    fs::create_directories(dir);
+    plot_bode(res, dir);
+    plot_gains(res, dir);
+    plot_validation(validations, max_n, dir);
+    std::ostringstream md;
+    md << "# pvcgel ident report\n\nSource: " << (a.sim ? "simulated rig" : "recordings in `" + a.from + "`")
+       << ".\n\n## Method\n\n"
+       << "- Extraction: fundamental (and harmonics 2..5, DC, linear drift) by least squares over the last whole "
+          "periods after the settling time; A, B and f estimated from `u_V` (four-parameter sine fit). Uncertainty: "
+          "spread of per-period estimates / sqrt(periods). Points with too few periods, a clipped or distorted input "
+          "or an unreadable file are flagged and excluded.\n"
+       << "- Sampling: the measured discrete response includes the zero-order hold and the rig's I/O delay ("
+       << io.io_delay_samples << " sample(s), a configured fact of the rig); both are removed (e^{+jw(d+1/2)Ts} / sinc) "
+          "before fitting the continuous G(s).\n"
+       << "- G(s): Levy / Sanathanan-Koerner, then Levenberg-Marquardt on the relative complex error, at the "
+          "reference regime.\n"
+       << "- Normalisation: " << kNormalisation << "\n"
+       << "- f: paper eq. (10) for n = 1.." << max_n << "; rule: " << res.f_fit.rule << ".\n\n"
+       << "## Results\n\n```\n" << out.str() << "```\n\n## Plots\n\n"
+       << "- Fig. 6 analogue: ![bode](bode.png)\n";
+    for (const auto& c : res.f_fit.candidates)
+      md << "- Figs. 7-9 analogue, n = " << c.terms << ": ![gain n=" << c.terms << "](gain_n" << c.terms << ".png)\n";
+    if (!validations.empty()) md << "- Fig. 10 analogue: ![validation](validation.png)\n";
+    write_file(dir / "report.md", md.str());
+    out << "wrote " << (dir / "report.md").string() << " and plots\n";
+  }
+  outcome.summary = out.str();
+  if (!problem.empty()) {
+    std::cout << outcome.summary << std::flush;
+    throw std::runtime_error(problem + "; no model written");
+  }
+  return outcome;
+}
+
+void add_ident_command(CLI::App& app) {
+  auto a = std::make_shared<IdentArgs>();
+  auto* c = app.add_subcommand("ident", "Describing-function system identification from sine experiments (paper Section III)");
+  c->add_flag("--sim", a->sim, "run the excitation plan on the simulated rig (accelerated)");
+  c->add_flag("--rig", a->rig, "run the plan on a running pvcgeld over DDS (not available yet)");
+  c->add_option("--from", a->from, "directory of recordings (*.csv, pvcgeld format), one sine experiment each");
+  c->add_option("--validation-dir", a->validation_dir, "held-out recordings for time-domain validation (default FROM/validation)");
+  c->add_option("--out", a->out, "write the [model] table (poly, G_num, G_den) to FILE");
+  c->add_option("--report", a->report, "write report.md and PNG plots to DIR");
+  c->add_option("--save-recordings", a->save_recordings, "--sim: also write every experiment as a recording to DIR");
+  c->add_option("--config", a->config, "--sim: TOML file with a [sim] table (default: the paper rig)")->check(CLI::ExistingFile);
+  c->add_flag("--ideal", a->ideal, "--sim: hysteresis and creep off (the truth is exactly a Hammerstein model)");
+  c->add_option("--seed", a->seed, "--sim: sensor-noise seed")->capture_default_str();
+  c->add_option("--amplitudes", a->grid.amplitudes_V, "sine amplitudes A (V)")->capture_default_str();
+  c->add_option("--biases", a->grid.biases_V, "sine biases B (V)")->capture_default_str();
+  c->add_option("--freq-min", a->grid.frequency_min_Hz, "lowest frequency (Hz)")->capture_default_str();
+  c->add_option("--freq-max", a->grid.frequency_max_Hz, "highest frequency (Hz)")->capture_default_str();
+  c->add_option("--freq-count", a->grid.frequency_count, "log-spaced frequencies")->capture_default_str();
+  c->add_option("--plan-settle", a->grid.settle_s, "--sim: settling time per experiment (s)")->capture_default_str();
+  c->add_option("--min-analysed", a->grid.min_analysed_s, "--sim: analysed seconds per experiment at least")->capture_default_str();
+  c->add_option("--settle", a->settle_s, "--from: settling time when a recording has no '# settle_s:' header (s)")->capture_default_str();
+  c->add_option("--min-periods", a->min_periods, "fewer whole periods after settling: flagged")->capture_default_str()->check(CLI::Range(2, 1000));
+  c->add_option("--num-order", a->options.G.numerator_order, "numerator order of G")->capture_default_str();
+  c->add_option("--den-order", a->options.G.denominator_order, "denominator order of G")->capture_default_str();
+  c->add_option("--ref-amplitude", a->options.reference_amplitude_V, "reference regime amplitude for G (V)")->capture_default_str();
+  c->add_option("--ref-bias", a->options.reference_bias_V, "reference regime bias for G (V)")->capture_default_str();
+  c->add_option("--max-n", a->options.f.max_terms, "fit polynomials n = 1..N")->capture_default_str()->check(CLI::Range(1, 8));
+  auto* nopt = c->add_option("--n", "use this n instead of the rule")->check(CLI::Range(1, 8));
+  c->add_option("--tolerance", a->options.f.tolerance, "rule: residual within this fraction of the best")->capture_default_str();
+  c->add_option("--voltage-max", a->options.f.voltage_max_V, "rule: f must be increasing on [0, this] V")->capture_default_str();
+  c->add_option("--io-delay-samples", a->options.io_delay_samples, "the rig's I/O delay, removed before fitting G")->capture_default_str();
+  c->add_flag("--quiet", a->quiet, "no progress lines");
+  c->callback([a, nopt] {
+    if (nopt->count()) a->options.f.forced_terms = nopt->as<int>();
+    const auto o = run_ident(*a);
+    std::cout << o.summary << std::flush;
+  });
+}
+
+}  // namespace pvcgel::tools

@@ -1,0 +1,66 @@
+#pragma once
+/// @file
+/// `pvcgel ident`: describing-function identification from sine experiments,
+/// on the simulated rig (`--sim`), from recordings (`--from DIR`), or on a
+/// running daemon (`--rig`, not available until the DDS interface exists).
+
+#include <CLI/CLI.hpp>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "control/hammerstein_model.hpp"
+#include "control/identification/excitation_plan.hpp"
+#include "control/identification/identification.hpp"
+#include "control/identification/sine_experiment.hpp"
+
+namespace pvcgel::tools {
+
+/// Everything `pvcgel ident` can be told.
+struct IdentArgs {
+  bool sim = false;              ///< run the plan on the simulated rig
+  bool rig = false;              ///< run the plan on a daemon over DDS (not available yet)
+  std::string from;              ///< directory of recordings, one sine experiment per *.csv
+  std::string validation_dir;    ///< held-out recordings (default: FROM/validation if present)
+  std::string out;               ///< model TOML to write
+  std::string report;            ///< directory for report.md and PNG plots
+  std::string save_recordings;   ///< --sim: write every experiment as a recording here
+  std::string config;            ///< --sim: TOML with a [sim] table (default: the paper rig)
+  bool ideal = false;            ///< --sim: hysteresis and creep off (truth exactly Hammerstein)
+  std::uint64_t seed = 1;
+  control::identification::ExcitationPlan::Grid grid{};
+  double settle_s = 10.0;        ///< --from: used when a recording has no `# settle_s:` header
+  int min_periods = 3;
+  control::identification::IdentificationOptions options{};
+  std::vector<double> validation_frequencies_Hz{0.1, 1.0};  ///< the paper's Fig. 10
+  double validation_amplitude_V = 400.0, validation_bias_V = 450.0;
+  bool quiet = false;            ///< no progress lines on stderr
+};
+
+/// What `run_ident` produced (for tests and callers).
+struct IdentOutcome {
+  control::identification::IdentificationResult result;
+  std::string summary;             ///< the text printed on stdout
+  double cpu_extract_fit_s = 0.0;  ///< CPU time of extraction and fits only
+  bool model_written = false;
+};
+
+/// Runs the identification the way the command line does.
+/// @throws std::runtime_error with a user-facing message (e.g. --rig, unreadable
+///         directory, too few valid points, a G refused for control).
+IdentOutcome run_ident(const IdentArgs& args);
+
+/// The `[model]` table the daemon reads (`poly`, `G_num`, `G_den`), with `#` comment lines first.
+std::string model_toml(const control::HammersteinModel& model, const std::string& comment);
+
+/// Writes an experiment in the daemon's recording format (same header style and
+/// columns as daemon/recorder.cpp; r_um and e_um are nan: there is no reference).
+void write_sine_recording(const std::filesystem::path& path, const control::identification::SineRecord& record,
+                          const std::vector<std::pair<std::string, std::string>>& header);
+
+/// Adds `ident` to the app.
+void add_ident_command(CLI::App& app);
+
+}  // namespace pvcgel::tools
