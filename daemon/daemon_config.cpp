@@ -1,6 +1,7 @@
 #include "daemon/daemon_config.hpp"
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -29,7 +30,7 @@ DaemonConfig load_daemon_config(const std::string& path) {
   }
 
   DaemonConfig cfg;
-  cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run"});
+  cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run", "dds"});
   cfg.realtime.period_s = cfg.rig.controller.sample_time_s;
 
   control::with_source(path, [&] {
@@ -75,6 +76,26 @@ DaemonConfig load_daemon_config(const std::string& path) {
     cfg.duration_s = run.number("duration_s", cfg.duration_s);
     if (!(cfg.duration_s > 0.0)) throw ConfigError(run.key("duration_s"), "must be positive");
     run.finish();
+
+    auto d = top.table("dds");
+    cfg.dds_enabled = d.boolean("enabled", false);
+    cfg.dds.domain = d.integer("domain", 0);
+    if (cfg.dds.domain < 0 || cfg.dds.domain > 232) throw ConfigError(d.key("domain"), "must be 0..232");
+    cfg.dds.rig_id = d.string("rig_id", cfg.dds.rig_id);
+    if (cfg.dds.rig_id.empty() || cfg.dds.rig_id.size() > 32)
+      throw ConfigError(d.key("rig_id"), "must be 1..32 characters");
+    cfg.dds.reliable_telemetry = d.boolean("reliable_telemetry", false);
+    const std::string xml = d.string("config", "");
+    if (cfg.dds_enabled && xml.empty())
+      throw ConfigError(d.key("config"), "a Cyclone DDS XML configuration is required when DDS is enabled "
+                                         "(bind the lab interface; config/cyclonedds-loopback.xml for tests)");
+    if (!xml.empty()) {
+      const std::filesystem::path p(xml);
+      cfg.dds.config_path = (p.is_absolute() ? p : std::filesystem::path(path).parent_path() / p).string();
+      if (cfg.dds_enabled && !std::filesystem::exists(cfg.dds.config_path))
+        throw ConfigError(d.key("config"), "file '" + cfg.dds.config_path + "' not found");
+    }
+    d.finish();
   });
 
   std::uint64_t h = 1469598103934665603ull;

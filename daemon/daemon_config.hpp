@@ -7,6 +7,7 @@
 
 #include "control/config_parser.hpp"
 #include "daemon/control_loop.hpp"
+#include "daemon/dds/dds_participant.hpp"
 #include "daemon/realtime_thread.hpp"
 
 namespace pvcgel::daemon {
@@ -20,6 +21,8 @@ struct DaemonConfig {
   std::string trajectory;  ///< empty: idle DISABLED until a setpoint source starts the loop
   double duration_s = std::numeric_limits<double>::infinity();
   std::string config_hash;  ///< FNV-1a 64 of the file's bytes, hex
+  bool dds_enabled = false;  ///< publish Telemetry over DDS
+  dds::DdsSettings dds;      ///< `[dds]`; config path resolved relative to the config file
 };
 
 /// Reads and validates `path`. @throws control::ConfigError naming the key and

@@ -12,6 +12,7 @@
 #include "control/config_error.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/recorder.hpp"
+#include "daemon/telemetry_publisher.hpp"
 #include "hal/sim_backend.hpp"
 
 using namespace pvcgel;
@@ -93,25 +94,30 @@ int run(const Options& opt) {
     run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
     loop_done.store(true, std::memory_order_release);
   });
-  std::thread writer;
+  std::unique_ptr<TelemetryPublisher> publisher;
+  if (cfg.dds_enabled) publisher = std::make_unique<TelemetryPublisher>(cfg.dds);
+  // The one consumer of the loop's records: recording and telemetry, off the RT thread.
   std::exception_ptr writer_error;
-  if (recorder) {
-    writer = std::thread([&] {
-      try {
-        recorder->run(*ring, loop_done);
-      } catch (...) {
-        writer_error = std::current_exception();
-      }
-    });
-  } else {
-    writer = std::thread([&] {
-      while (!loop_done.load(std::memory_order_acquire) || ring->size() > 0) {
-        while (ring->pop()) {
+  std::thread writer([&] {
+    try {
+      for (;;) {
+        bool any = false;
+        while (auto r = ring->pop()) {
+          any = true;
+          if (recorder) recorder->write(*r);
+          if (publisher) publisher->publish(*r);
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        if (recorder) recorder->flush_if_due();
+        if (!any) {
+          if (loop_done.load(std::memory_order_acquire) && ring->size() == 0) break;
+          std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        }
       }
-    });
-  }
+      if (recorder) recorder->finish();
+    } catch (...) {
+      writer_error = std::current_exception();
+    }
+  });
   while (!started.load(std::memory_order_acquire)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   if (!report.warnings.empty())
     std::cerr << "pvcgeld: WARNING: " << report.warnings << "\n";
@@ -120,7 +126,10 @@ int run(const Options& opt) {
                                            : std::string("NOT real-time (SCHED_OTHER)"))
             << ", memory " << (report.memory_locked ? "locked" : "NOT locked") << ", backend " << hal.name()
             << ", mode " << control::to_string(cfg.rig.controller.mode)
-            << (has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)")) << "\n";
+            << (has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)"))
+            << (publisher ? ", DDS telemetry as rig '" + cfg.dds.rig_id + "' on domain " + std::to_string(cfg.dds.domain)
+                          : std::string())
+            << "\n";
   sd_notify(0, "READY=1");
 
   std::uint64_t watchdog_usec = 0;

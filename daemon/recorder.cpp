@@ -5,7 +5,6 @@
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
-#include <thread>
 
 namespace pvcgel::daemon {
 
@@ -29,7 +28,8 @@ Recorder::~Recorder() {
 }
 
 void Recorder::write(const CycleRecord& r) {
-  if (r.seq != next_seq_) gaps_ += r.seq > next_seq_ ? r.seq - next_seq_ : 1;
+  // A late joiner (pvcgel record) starts wherever the stream is; gaps count from there.
+  if (rows_ > 0 && r.seq != next_seq_) gaps_ += r.seq > next_seq_ ? r.seq - next_seq_ : 1;
   next_seq_ = r.seq + 1;
   std::fprintf(file_, "%.4f,%.6f,%.4f,%.4f,%.4f,%.5g,%s,%s,%s,%d,%.1f\n", r.t_s, r.u_V, r.y_um, r.r_um, r.e_um,
                r.d_hat, control::to_string(r.mode).data(), to_string(r.state).data(), to_string(r.fault).data(),
@@ -37,25 +37,17 @@ void Recorder::write(const CycleRecord& r) {
   ++rows_;
 }
 
-void Recorder::run(RecordRing& ring, const std::atomic<bool>& done) {
-  auto last_flush = std::chrono::steady_clock::now();
-  for (;;) {
-    bool any = false;
-    while (auto r = ring.pop()) {
-      write(*r);
-      any = true;
-    }
-    const auto now = std::chrono::steady_clock::now();
-    if (now - last_flush > std::chrono::milliseconds(100)) {
-      std::fflush(file_);
-      last_flush = now;
-    }
-    if (!any) {
-      if (done.load(std::memory_order_acquire) && ring.size() == 0) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
+void Recorder::flush_if_due() {
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_flush_ > std::chrono::milliseconds(100)) {
+    std::fflush(file_);
+    last_flush_ = now;
   }
-  if (std::fflush(file_) != 0) throw std::runtime_error("writing recording '" + path_ + "' failed: " + std::strerror(errno));
+}
+
+void Recorder::finish() {
+  if (std::fflush(file_) != 0 || std::ferror(file_))
+    throw std::runtime_error("writing recording '" + path_ + "' failed: " + std::strerror(errno));
 }
 
 }  // namespace pvcgel::daemon

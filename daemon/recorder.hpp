@@ -2,7 +2,7 @@
 /// @file
 /// Writes every cycle of the loop to a CSV recording, off the real-time thread.
 
-#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -28,17 +28,20 @@ class Recorder final {
   Recorder(const Recorder&) = delete;
   Recorder& operator=(const Recorder&) = delete;
 
-  /// Drains the ring until `done` is set and the ring is empty; flushes about
-  /// every 100 ms so a crash loses at most that much. Checks sequence numbers.
-  void run(RecordRing& ring, const std::atomic<bool>& done);
+  /// Append one row (non-RT thread). Checks sequence numbers.
+  void write(const CycleRecord& r);
+  /// Flush if about 100 ms passed since the last flush, so a crash loses at most that much.
+  void flush_if_due();
+  /// Flush everything. @throws std::runtime_error naming the file if writing failed.
+  void finish();
   /// Rows written.
   [[nodiscard]] std::uint64_t rows() const noexcept { return rows_; }
   /// Missing sequence numbers seen (must be 0).
   [[nodiscard]] std::uint64_t gaps() const noexcept { return gaps_; }
 
  private:
-  void write(const CycleRecord& r);
   std::FILE* file_ = nullptr;
+  std::chrono::steady_clock::time_point last_flush_ = std::chrono::steady_clock::now();
   std::string path_;
   std::uint64_t rows_ = 0, gaps_ = 0, next_seq_ = 0;
 };

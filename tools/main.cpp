@@ -5,6 +5,7 @@
 #include "control/config_error.hpp"
 #include "tools/bench_command.hpp"
 #include "tools/ident_command.hpp"
+#include "tools/record_command.hpp"
 #include "tools/show_command.hpp"
 
 int main(int argc, char** argv) {
@@ -12,6 +13,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   pvcgel::tools::add_bench_command(app);
   pvcgel::tools::add_show_command(app);
+  pvcgel::tools::add_record_command(app);
   pvcgel::tools::add_ident_command(app);
   try {
     app.parse(argc, argv);

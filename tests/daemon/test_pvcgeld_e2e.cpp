@@ -19,6 +19,8 @@ extern char** environ;
 namespace {
 
 const std::string kDaemon = PVCGELD_PATH;
+const std::string kClient = PVCGEL_PATH;
+const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclonedds-loopback.xml";
 const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
 
 struct Result {
@@ -35,11 +37,11 @@ std::string slurp(const std::string& path) {
 }
 
 /// Runs pvcgeld; if sigterm_after_s > 0, sends SIGTERM then. Waits for exit.
-Result run_daemon(std::vector<std::string> args, double sigterm_after_s = 0.0) {
+Result run_program(const std::string& program, std::vector<std::string> args, double sigterm_after_s = 0.0) {
   static int counter = 0;
   const std::string err_path = ::testing::TempDir() + "pvcgeld_stderr_" + std::to_string(getpid()) + "_" +
                                std::to_string(counter++) + ".txt";
-  args.insert(args.begin(), kDaemon);
+  args.insert(args.begin(), program);
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -47,7 +49,7 @@ Result run_daemon(std::vector<std::string> args, double sigterm_after_s = 0.0) {
   posix_spawn_file_actions_init(&fa);
   posix_spawn_file_actions_addopen(&fa, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   pid_t pid = 0;
-  EXPECT_EQ(posix_spawn(&pid, kDaemon.c_str(), &fa, nullptr, argv.data(), environ), 0);
+  EXPECT_EQ(posix_spawn(&pid, program.c_str(), &fa, nullptr, argv.data(), environ), 0);
   posix_spawn_file_actions_destroy(&fa);
   if (sigterm_after_s > 0.0) {
     std::this_thread::sleep_for(std::chrono::duration<double>(sigterm_after_s));
@@ -63,6 +65,10 @@ Result run_daemon(std::vector<std::string> args, double sigterm_after_s = 0.0) {
   const auto pos = r.err.find("loop running");
   if (pos != std::string::npos) std::cout << "[mode] " << r.err.substr(pos, r.err.find('\n', pos) - pos) << "\n";
   return r;
+}
+
+Result run_daemon(std::vector<std::string> args, double sigterm_after_s = 0.0) {
+  return run_program(kDaemon, std::move(args), sigterm_after_s);
 }
 
 size_t first_index_of(const std::vector<std::string>& v, const std::string& s) {
@@ -113,6 +119,48 @@ TEST(PvcgeldE2E, DurationRunExitsCleanlyWithTrackingError) {
   EXPECT_GT(running, 1500);
   // Bench: inverse_pid_dob at 0.5 Hz has max |e| 0.86 um; allow start-up residue.
   EXPECT_LT(worst, 2.0);
+}
+
+// Telemetry over DDS (loopback-only Cyclone configuration): a late-joining
+// reliable reader records every cycle from where it joined, without gaps.
+TEST(PvcgelRecordE2E, LosslessTelemetryRecordingOverDds) {
+  const std::string out = ::testing::TempDir() + "e2e_dds_record.csv";
+  std::thread daemon([] {
+    const auto r = run_daemon({"--config", kSimConfig, "--trajectory", "paper-0.5hz", "--duration", "5"});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "3", "--dds-config", kDdsConfig, "--wait", "10"});
+  daemon.join();
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("sequence gaps 0"), std::string::npos) << r.err;
+  const auto rec = pvcgel::tools::read_recording(out);  // throws on missing rows (non-uniform time)
+  EXPECT_GE(rec.rows(), 3000u);
+  EXPECT_EQ(rec.header.at("rig_id"), "rig1");
+}
+
+TEST(PvcgelRecordE2E, UnknownRigAndNoDaemonAreReported) {
+  std::thread daemon([] { (void)run_daemon({"--config", kSimConfig, "--trajectory", "hold:50", "--duration", "3"}); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const auto wrong = run_program(kClient, {"record", "--out", ::testing::TempDir() + "x.csv", "--rig", "rig9",
+                                           "--dds-config", kDdsConfig, "--wait", "2"});
+  daemon.join();
+  EXPECT_NE(wrong.exit_code, 0);
+  EXPECT_NE(wrong.err.find("rig 'rig9' unknown; rigs seen: rig1"), std::string::npos) << wrong.err;
+  const auto none = run_program(kClient, {"record", "--out", ::testing::TempDir() + "y.csv", "--dds-config", kDdsConfig,
+                                          "--wait", "1"});
+  EXPECT_NE(none.exit_code, 0);
+  EXPECT_NE(none.err.find("no daemon found within"), std::string::npos) << none.err;
+}
+
+TEST(PvcgelRecordE2E, StreamThatStopsEndsTheRecordingWithAnError) {
+  const std::string out = ::testing::TempDir() + "e2e_dds_stopped.csv";
+  std::thread daemon([] { (void)run_daemon({"--config", kSimConfig, "--trajectory", "hold:50", "--duration", "1"}); });
+  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "30", "--dds-config", kDdsConfig, "--wait", "2"});
+  daemon.join();
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("telemetry stopped"), std::string::npos) << r.err;
+  EXPECT_GT(pvcgel::tools::read_recording(out).rows(), 500u) << "what arrived is kept";
 }
 
 struct E2EFault {
