@@ -10,14 +10,10 @@
 #include "control/identification/sine_experiment.hpp"
 #include "control/lti_filter.hpp"
 
+#include "support/frequency_response_data.hpp"
+
 namespace pvcgel::control::identification {
 namespace {
-
-std::vector<std::complex<double>> sorted(const Eigen::VectorXcd& r) {
-  std::vector<std::complex<double>> v(r.data(), r.data() + r.size());
-  std::sort(v.begin(), v.end(), [](auto a, auto b) { return a.real() < b.real(); });
-  return v;
-}
 
 TEST(IdentPipeline, SamplingDelayRemovalMatchesTheExactZohPlant) {
   // The sampled plant the rig realises is the exact ZOH discretisation of G plus
@@ -63,7 +59,7 @@ TEST(IdentPipeline, RecoversPolesAndZeroOfTheSimulatedRigWithinThreePercent) {
   ASSERT_EQ(r.used.size(), r.points.size());
   ASSERT_EQ(r.reference.size(), 4u);
   const auto truth = paper_model(3).G;
-  const auto p = sorted(r.G_fit.poles), pt = sorted(truth.poles());
+  const auto p = test::sorted_roots(r.G_fit.poles), pt = test::sorted_roots(truth.poles());
   ASSERT_EQ(p.size(), 2u);
   for (size_t i = 0; i < 2; ++i) {
     EXPECT_LT(std::abs(p[i] - pt[i]) / std::abs(pt[i]), 0.03) << p[i] << " vs " << pt[i];

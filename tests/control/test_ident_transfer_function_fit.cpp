@@ -8,27 +8,17 @@
 #include "control/hammerstein_model.hpp"
 #include "control/identification/excitation_plan.hpp"
 
+#include "support/frequency_response_data.hpp"
+
 namespace pvcgel::control::identification {
 namespace {
-
-// Sort roots by real part so they can be compared pairwise.
-std::vector<std::complex<double>> sorted(const Eigen::VectorXcd& r) {
-  std::vector<std::complex<double>> v(r.data(), r.data() + r.size());
-  std::sort(v.begin(), v.end(), [](auto a, auto b) { return a.real() < b.real(); });
-  return v;
-}
 
 TEST(IdentTransferFunctionFit, RecoversAKnownGFromExactData) {
   const auto G = paper_model(2).G;
   const auto f = log_spaced(0.1, 10.0, 7);
-  Eigen::VectorXd w(7);
-  Eigen::VectorXcd H(7);
-  for (int k = 0; k < 7; ++k) {
-    w(k) = 2 * M_PI * f[static_cast<size_t>(k)];
-    H(k) = G({0.0, w(k)});
-  }
+  const auto [w, H] = test::exact_response(G, f);
   const auto fit = fit_transfer_function(w, H);
-  const auto p = sorted(fit.poles), pt = sorted(G.poles());
+  const auto p = test::sorted_roots(fit.poles), pt = test::sorted_roots(G.poles());
   ASSERT_EQ(p.size(), 2u);
   for (size_t i = 0; i < 2; ++i) EXPECT_LT(std::abs(p[i] - pt[i]) / std::abs(pt[i]), 1e-6) << p[i] << " vs " << pt[i];
   ASSERT_EQ(fit.zeros.size(), 1);
@@ -57,12 +47,7 @@ TEST(IdentTransferFunctionFit, RecoversOtherOrders) {
 TEST(IdentTransferFunctionFit, RefusesNonMinimumPhaseForControl) {
   const TransferFunction G({-1.15, 1.03}, {1.0, 17.11, 8.76});  // zero at s = +0.9
   const auto f = log_spaced(0.1, 10.0, 7);
-  Eigen::VectorXd w(7);
-  Eigen::VectorXcd H(7);
-  for (int k = 0; k < 7; ++k) {
-    w(k) = 2 * M_PI * f[static_cast<size_t>(k)];
-    H(k) = G({0.0, w(k)});
-  }
+  const auto [w, H] = test::exact_response(G, f);
   const auto fit = fit_transfer_function(w, H);
   EXPECT_TRUE(fit.stable);
   EXPECT_FALSE(fit.minimum_phase);
