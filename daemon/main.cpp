@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <systemd/sd-daemon.h>
 
+#include <charconv>
 #include <csignal>
 #include <cmath>
 #include <cstdio>
@@ -51,7 +52,12 @@ int run(const Options& opt) {
       throw control::ConfigError("--inject-fault", "expected KIND@SECONDS with KIND one of sensor_nan, sensor_stuck, "
                                                    "sensor_out_of_range, sensor_dropout, amplifier_fault; got '" +
                                                        opt.inject + "'");
-    sim->schedule(*kind, std::stod(opt.inject.substr(at + 1)));
+    const std::string when = opt.inject.substr(at + 1);
+    double t_s = NAN;
+    const auto [end, ec] = std::from_chars(when.data(), when.data() + when.size(), t_s);
+    if (ec != std::errc() || end != when.data() + when.size() || !(t_s >= 0.0))
+      throw control::ConfigError("--inject-fault", "'" + when + "' is not a time in seconds (KIND@SECONDS)");
+    sim->schedule(*kind, t_s);
   }
   if (opt.check_only) {
     std::cout << "pvcgeld: configuration " << opt.config << " is valid (hash " << cfg.config_hash << ")\n";

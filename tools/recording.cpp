@@ -99,20 +99,16 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
     if (!keep[r]) ++rec.invalid_rows;
     if (keep_invalid_rows && std::isfinite(t0[r])) keep[r] = true;
   }
-  for (auto* m : {&rec.numeric}) {
-    for (auto& [name, v] : *m) {
-      std::vector<double> kept;
+  auto keep_rows = [&](auto& columns) {
+    for (auto& [name, v] : columns) {
+      std::remove_reference_t<decltype(v)> kept;
       for (size_t r = 0; r < v.size(); ++r)
         if (keep[r]) kept.push_back(v[r]);
       v = std::move(kept);
     }
-  }
-  for (auto& [name, v] : rec.text) {
-    std::vector<std::string> kept;
-    for (size_t r = 0; r < v.size(); ++r)
-      if (keep[r]) kept.push_back(v[r]);
-    v = std::move(kept);
-  }
+  };
+  keep_rows(rec.numeric);
+  keep_rows(rec.text);
   std::vector<int> lines;
   for (size_t r = 0; r < keep.size(); ++r)
     if (keep[r]) lines.push_back(line_of_row[r]);
