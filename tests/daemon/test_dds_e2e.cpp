@@ -26,12 +26,13 @@ const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclone
 const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
 
 /// A daemon config: the shipped sim config, idle at start, on `domain` as `rig`.
-std::string write_config(const std::string& name, int domain, const std::string& rig, const std::string& extra = "") {
+std::string write_config(const std::string& name, int domain, const std::string& rig, const std::string& extra = "",
+                         const std::string& dds_xml = kDdsConfig) {
   std::string text = test::slurp(kSimConfig);
   text = std::regex_replace(text, std::regex("\ntrajectory = [^\n]*"), "\n");
   text = std::regex_replace(text, std::regex("\ndomain = 0"), "\ndomain = " + std::to_string(domain));
   text = std::regex_replace(text, std::regex("\nrig_id = \"rig1\""), "\nrig_id = \"" + rig + "\"");
-  text = std::regex_replace(text, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + kDdsConfig + "\"");
+  text = std::regex_replace(text, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + dds_xml + "\"");
   text += extra;
   const std::string path = ::testing::TempDir() + name + ".toml";
   std::ofstream(path) << text;
@@ -288,5 +289,38 @@ TEST(DdsE2E, AFloodOfChunksAndCommandsIsThrottledAndTheLoopKeepsItsTiming) {
   const double b = p999(before), d = p999(during);
   // Printed, not asserted: this shared CI machine's jitter is noise (see the benchmark for the comparison).
   std::cout << "[flood] wake-up latency p99.9: before " << b << " us, during " << d << " us, ratio " << d / b << "\n";
+  EXPECT_EQ(daemon.stop().exit_code, 0);
+}
+
+// DDS Security with test certificates (config/dds-security/make-test-pki.sh):
+// an authenticated client drives the rig, a read-only identity may watch but
+// not command, and a participant without credentials does not even see it.
+TEST(DdsE2E, SecuredModeAuthenticatesAndEnforcesPermissions) {
+  if (std::system("command -v openssl > /dev/null") != 0) GTEST_SKIP() << "skipped: openssl not installed";
+  if (std::system("test -e /usr/lib/x86_64-linux-gnu/libddsc0debian/libdds_security_auth.so") != 0)
+    GTEST_SKIP() << "skipped: Cyclone DDS Security plugins not installed";
+  const std::string pki = ::testing::TempDir() + "pvcgel_pki";
+  ASSERT_EQ(std::system(("rm -rf " + pki + " && " + PVCGEL_SOURCE_DIR + "/config/dds-security/make-test-pki.sh " + pki +
+                         " 16 > /dev/null")
+                            .c_str()),
+            0);
+  Process daemon(kDaemon, {"--config", write_config("secure", 16, "sec", "", pki + "/daemon.xml")});
+  const auto with = [&](const std::string& xml, std::vector<std::string> args, const char* wait = "10") {
+    args.insert(args.end(), {"--rig", "sec", "--domain", "16", "--dds-config", xml, "--wait", wait});
+    return run_program(kClient, args);
+  };
+  const auto started = with(pki + "/client.xml", {"start"});
+  EXPECT_EQ(started.exit_code, 0) << started.err;
+  const auto sent = with(pki + "/client.xml", {"send", "hold", "15", "--blend", "1"});
+  EXPECT_EQ(sent.exit_code, 0) << sent.err;
+  const auto observed = with(pki + "/observer.xml", {"status"});
+  EXPECT_EQ(observed.exit_code, 0) << observed.err;
+  EXPECT_NE(observed.out.find("RUNNING"), std::string::npos) << observed.out;
+  EXPECT_NE(observed.out.find("1 chunks"), std::string::npos) << observed.out;
+  const auto refused = with(pki + "/observer.xml", {"stop"});
+  EXPECT_NE(refused.exit_code, 0);
+  EXPECT_NE(refused.err.find("Not Allowed By Security"), std::string::npos) << refused.err;
+  const auto plain = with(kDdsConfig, {"status"}, "3");
+  EXPECT_EQ(plain.exit_code, 3) << "an unauthenticated participant does not see the rig: " << plain.err;
   EXPECT_EQ(daemon.stop().exit_code, 0);
 }
