@@ -84,11 +84,10 @@ void DdsClient::poll_status() {
           other_rigs_.emplace_back(s->rig_id);
         continue;
       }
-      if (!status_) {
-        if (auto* ep = dds_get_matched_publication_data(status_reader_.get(), infos[i].publication_handle)) {
-          daemon_participant_ = ep->participant_key;
-          dds_builtintopic_free_endpoint(ep);
-        }
+      if (auto* ep = dds_get_matched_publication_data(status_reader_.get(), infos[i].publication_handle)) {
+        if (!status_) daemon_participant_ = ep->participant_key;
+        else if (!same_guid(ep->participant_key, daemon_participant_)) duplicate_rig_ = true;
+        dds_builtintopic_free_endpoint(ep);
       }
       status_ = *s;
     }
@@ -127,6 +126,12 @@ const pvcgel_v1_Status& DdsClient::connect() {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  // Two daemons configured with one rig id would both obey every command: refuse to talk to either.
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  poll_status();
+  if (duplicate_rig_)
+    throw std::runtime_error("two daemons on domain " + std::to_string(opt_.domain) + " claim rig '" + opt_.rig +
+                             "': give each rig its own [dds] rig_id");
   // A reply or sample sent before the daemon's writer matched our reader would be lost.
   while (!(matched_daemon(reply_reader_.get(), false) &&
            (telemetry_reader_.get() == 0 || matched_daemon(telemetry_reader_.get(), false)))) {

@@ -88,6 +88,7 @@ class DdsClient final {
   std::optional<pvcgel_v1_Status> status_;
   dds_guid_t daemon_participant_{};
   std::vector<std::string> other_rigs_;
+  bool duplicate_rig_ = false;
   std::vector<pvcgel_v1_CommandReply> stray_replies_;
 };
 
