@@ -145,6 +145,7 @@ void ModbusBackend::set_cycle_timeout() noexcept {
 }
 
 void ModbusBackend::flush_if_pending() noexcept {
+  if (since_timeout_ < kLateReplyWindow) ++since_timeout_;
   // A reply that came after its deadline would otherwise answer this request.
   if (!flush_pending_) return;
   modbus_flush(ctx_.get());
@@ -196,7 +197,7 @@ void ModbusBackend::measure_round_trip() {
     if (i >= 0) us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
   }
   std::sort(us.begin(), us.end());
-  const auto q = [&](double p) { return us[std::min(us.size() - 1, static_cast<size_t>(p * static_cast<double>(us.size())))]; };
+  const auto q = [&](double p) { return us[static_cast<size_t>(p * static_cast<double>(us.size() - 1))]; };
   rtt_.p50_us = q(0.5);
   rtt_.p99_us = q(0.99);
   rtt_.max_us = us.back();
@@ -224,6 +225,15 @@ HalStatus ModbusBackend::transaction_failed(int rc) noexcept {
     timeouts_.fetch_add(1, std::memory_order_relaxed);
     status = HalStatus::timeout;
     flush_pending_ = true;
+    since_timeout_ = 0;
+  } else if (e == EMBBADDATA && since_timeout_ < kLateReplyWindow) {
+    // Most likely the late answer to a request that timed out just before: one
+    // more missed sample, not a broken device.
+    late_replies_.fetch_add(1, std::memory_order_relaxed);
+    timeouts_.fetch_add(1, std::memory_order_relaxed);
+    status = HalStatus::timeout;
+    modbus_flush(ctx_.get());
+    flush_pending_ = true;
   } else if (is_exception(e)) {
     exceptions_.fetch_add(1, std::memory_order_relaxed);
   } else if (is_garbage(e) || rc >= 0) {
@@ -235,6 +245,10 @@ HalStatus ModbusBackend::transaction_failed(int rc) noexcept {
   }
   if (reset_link || ++consecutive_failures_ >= config_.reconnect_after_failures) {
     consecutive_failures_ = 0;
+    // A lost link counts as an interlock trip: whatever the loop still commands
+    // (a ramp-down), after reconnecting the register stays at 0 V until re-armed.
+    hv_enabled_ = false;
+    hv_flag_.store(false, std::memory_order_relaxed);
     disconnects_.fetch_add(1, std::memory_order_relaxed);
     link_.store(Link::down, std::memory_order_release);  // from here on the supervisor owns the context
     return HalStatus::disconnected;
@@ -325,9 +339,9 @@ HalHealth ModbusBackend::health() const noexcept {
 }
 
 ModbusCounters ModbusBackend::counters() const noexcept {
-  return {timeouts_.load(std::memory_order_relaxed), exceptions_.load(std::memory_order_relaxed),
-          garbage_.load(std::memory_order_relaxed), disconnects_.load(std::memory_order_relaxed),
-          reconnects_.load(std::memory_order_relaxed)};
+  return {timeouts_.load(std::memory_order_relaxed),     exceptions_.load(std::memory_order_relaxed),
+          garbage_.load(std::memory_order_relaxed),      disconnects_.load(std::memory_order_relaxed),
+          reconnects_.load(std::memory_order_relaxed),   late_replies_.load(std::memory_order_relaxed)};
 }
 
 void ModbusBackend::supervise() {

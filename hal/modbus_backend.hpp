@@ -64,6 +64,7 @@ struct ModbusRtt {
 /// Counters beyond HalHealth.
 struct ModbusCounters {
   std::uint64_t timeouts = 0, exceptions = 0, garbage_frames = 0, disconnects = 0, reconnects = 0;
+  std::uint64_t late_replies = 0;  ///< answers to an earlier, timed-out request (counted as timeouts too)
 };
 
 /// Modbus backend. The real-time calls touch the libmodbus context only while
@@ -105,6 +106,7 @@ class ModbusBackend final : public Hal {
   };
 
   static constexpr std::uint32_t kFirstContactTimeout_s = 1;  ///< first write after (re)connecting
+  static constexpr int kLateReplyWindow = 4;  ///< transactions after a timeout in which a mismatched reply counts as late
 
   HalStatus transaction_failed(int rc) noexcept;
   void set_cycle_timeout() noexcept;
@@ -129,12 +131,13 @@ class ModbusBackend final : public Hal {
   double last_output_V_ = 0.0;
   int consecutive_failures_ = 0;
   bool flush_pending_ = false;  // a timed-out or garbled reply may still be on its way
+  int since_timeout_ = kLateReplyWindow;  // RT transactions since the last timeout
   int monitor_mismatches_ = 0;
   bool amplifier_fault_ = false;
 
   std::atomic<Link> link_{Link::down};
   std::atomic<std::uint64_t> reads_{0}, writes_{0}, timeouts_{0}, exceptions_{0}, garbage_{0}, device_faults_{0},
-      disconnects_{0}, reconnects_{0};
+      disconnects_{0}, reconnects_{0}, late_replies_{0};
   std::atomic<bool> hv_flag_{false}, amp_fault_flag_{false};
 
   std::mutex supervisor_mutex_;  // supervisor thread and destructor only

@@ -2,7 +2,8 @@
 // A minimal Modbus TCP responder on a raw socket, written for the tests that
 // need replies no real server sends: it answers correctly, with malformed
 // frames (wrong transaction id, wrong function, wrong byte count), or with
-// protocol exceptions, as the test switches it.
+// protocol exceptions, as the test switches it. Its serving thread never
+// allocates, so it can share a process with the allocation-counting tests.
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -10,11 +11,12 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
+#include <initializer_list>
 #include <cstdint>
 #include <stdexcept>
 #include <thread>
-#include <vector>
 
 namespace pvcgel::test {
 
@@ -77,46 +79,58 @@ class RawModbusServer {
         const size_t len = static_cast<size_t>(hdr[4] << 8 | hdr[5]);
         if (len < 2 || len > 254 || !read_exact(fd, pdu, len - 1)) break;
         const std::uint8_t fc = pdu[0];
-        std::vector<std::uint8_t> body;  // unit id onwards
+        Frame body;  // unit id onwards
         const Mode mode = mode_.load();
         if (mode == Mode::exception) {
-          body = {hdr[6], static_cast<std::uint8_t>(fc | 0x80), 0x04};  // server device failure
+          body.set({hdr[6], static_cast<std::uint8_t>(fc | 0x80), 0x04});  // server device failure
           ++bad_replies_;
         } else if (mode == Mode::garbage) {
           ++bad_replies_;
           switch (variant++ % 3) {
             case 0:  // a well-formed reply to another transaction
               hdr[1] = static_cast<std::uint8_t>(hdr[1] + 1);
-              body = reply(hdr[6], fc, pdu);
+              reply(hdr[6], fc, pdu, body);
               break;
             case 1:  // the wrong function code
-              body = {hdr[6], static_cast<std::uint8_t>(fc == 5 ? 6 : 5), 0, 10, 0, 0};
+              body.set({hdr[6], static_cast<std::uint8_t>(fc == 5 ? 6 : 5), 0, 10, 0, 0});
               break;
             default:  // a byte count that does not match the request
-              body = {hdr[6], fc, 2, 0, 1};
+              body.set({hdr[6], fc, 2, 0, 1});
               break;
           }
         } else {
-          body = reply(hdr[6], fc, pdu);
+          reply(hdr[6], fc, pdu, body);
         }
-        std::vector<std::uint8_t> frame(hdr, hdr + 4);
-        frame.push_back(static_cast<std::uint8_t>(body.size() >> 8));
-        frame.push_back(static_cast<std::uint8_t>(body.size() & 0xFF));
-        frame.insert(frame.end(), body.begin(), body.end());
-        if (::send(fd, frame.data(), frame.size(), MSG_NOSIGNAL) < 0) break;
+        std::array<std::uint8_t, 300> frame;
+        for (size_t i = 0; i < 4; ++i) frame[i] = hdr[i];
+        frame[4] = static_cast<std::uint8_t>(body.size >> 8);
+        frame[5] = static_cast<std::uint8_t>(body.size & 0xFF);
+        for (size_t i = 0; i < body.size; ++i) frame[6 + i] = body.bytes[i];
+        if (::send(fd, frame.data(), 6 + body.size, MSG_NOSIGNAL) < 0) break;
       }
       ::close(fd);
     }
   }
-  static std::vector<std::uint8_t> reply(std::uint8_t unit, std::uint8_t fc, const std::uint8_t* pdu) {
+  struct Frame {
+    std::array<std::uint8_t, 260> bytes{};
+    size_t size = 0;
+    void set(std::initializer_list<std::uint8_t> b) {
+      size = 0;
+      for (auto x : b) bytes[size++] = x;
+    }
+  };
+  static void reply(std::uint8_t unit, std::uint8_t fc, const std::uint8_t* pdu, Frame& out) {
     if (fc == 3 || fc == 4) {
       const int n = pdu[3] << 8 | pdu[4];
-      std::vector<std::uint8_t> b{unit, fc, static_cast<std::uint8_t>(2 * n)};
-      for (int i = 0; i < n; ++i) b.insert(b.end(), {0, static_cast<std::uint8_t>(i == 1 ? 100 : 0)});
-      return b;
+      out.set({unit, fc, static_cast<std::uint8_t>(2 * n)});
+      for (int i = 0; i < n; ++i) {
+        out.bytes[out.size++] = 0;
+        out.bytes[out.size++] = static_cast<std::uint8_t>(i == 1 ? 100 : 0);
+      }
+      return;
     }
-    if (fc == 6 || fc == 16) return {unit, fc, pdu[1], pdu[2], pdu[3], pdu[4]};
-    return {unit, static_cast<std::uint8_t>(fc | 0x80), 0x01};
+    if (fc == 6 || fc == 16) return out.set({unit, fc, pdu[1], pdu[2], pdu[3], pdu[4]});
+    out.set({unit, static_cast<std::uint8_t>(fc | 0x80), 0x01});
   }
 
   int listen_fd_ = -1;
