@@ -326,3 +326,31 @@ TEST(ModbusBackend, ServerKilledMidRunThenReconnectWritesZeroBeforeAnythingElse)
   EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
   EXPECT_GE(backend.health().reconnects, 1u);
 }
+
+TEST(ModbusBackend, MonitorDisagreeingWithTheCommandIsAnAmplifierFault) {
+  // The raw server's monitor registers read 0 whatever is commanded: an amplifier that does not follow.
+  test::RawModbusServer raw;
+  auto cfg = test::plant_modbus_config(raw.port());
+  cfg.monitor_voltage_tolerance_V = 5.0;
+  cfg.monitor_fault_after_cycles = 3;
+  hal::ModbusBackend backend(cfg);
+  ASSERT_EQ(backend.set_high_voltage(true), HalStatus::ok);
+  double y = 0;
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
+  EXPECT_EQ(backend.write_voltage(3.0), HalStatus::ok) << "0 V measured vs 0 V commanded before";
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
+  EXPECT_EQ(backend.write_voltage(300.0), HalStatus::ok) << "3 V vs 0 V measured: within 5 V";
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
+    EXPECT_EQ(backend.write_voltage(300.0), HalStatus::ok) << "mismatch " << k + 1 << " of 3";
+  }
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::ok) << "the sensor itself is fine";
+  EXPECT_EQ(backend.write_voltage(300.0), HalStatus::device_fault) << "third mismatch in a row";
+  EXPECT_TRUE(backend.health().amplifier_fault);
+  // Disabling and re-arming clears it; the mismatch must build up again.
+  backend.set_high_voltage(false);
+  ASSERT_EQ(backend.set_high_voltage(true), HalStatus::ok);
+  EXPECT_FALSE(backend.health().amplifier_fault);
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
+  EXPECT_EQ(backend.write_voltage(0.0), HalStatus::ok);
+}
