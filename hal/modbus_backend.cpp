@@ -303,6 +303,8 @@ HalStatus ModbusBackend::write_voltage(double voltage_V) noexcept {
 }
 
 HalStatus ModbusBackend::set_high_voltage(bool enabled) noexcept {
+  const bool up = link_.load(std::memory_order_acquire) == Link::up;
+  if (enabled && !up) return HalStatus::disconnected;  // stays disabled: nothing to arm
   hv_enabled_ = enabled;
   hv_flag_.store(enabled, std::memory_order_relaxed);
   if (enabled) {
@@ -310,10 +312,10 @@ HalStatus ModbusBackend::set_high_voltage(bool enabled) noexcept {
     amplifier_fault_ = false;
     monitor_mismatches_ = 0;
     amp_fault_flag_.store(false, std::memory_order_relaxed);
-    return link_.load(std::memory_order_acquire) == Link::up ? HalStatus::ok : HalStatus::disconnected;
+    return HalStatus::ok;
   }
   // Without an enable line of its own the backend disables by commanding 0 V now.
-  if (link_.load(std::memory_order_acquire) == Link::up) {
+  if (up) {
     flush_if_pending();
     const int rc = write_zero();
     if (rc != 1) return transaction_failed(rc < 0 ? rc : 0);
