@@ -11,6 +11,9 @@
 namespace pvcgel::daemon {
 
 std::unique_ptr<hal::Hal> make_hal(const DaemonConfig& cfg, std::unique_ptr<hal::SimBackend> sim, bool faults_injected) {
+  // The interlock lines first: HV enable is driven inactive before the amplifier link is touched.
+  std::unique_ptr<hal::GpioLines> lines;
+  if (cfg.hal.gpio) lines = std::make_unique<hal::GpiodLines>(*cfg.hal.gpio);
   std::unique_ptr<hal::Hal> backend;
   if (cfg.hal.backend == "modbus") {
     if (faults_injected)
@@ -26,8 +29,7 @@ std::unique_ptr<hal::Hal> make_hal(const DaemonConfig& cfg, std::unique_ptr<hal:
   } else {
     backend = std::move(sim);
   }
-  if (!cfg.hal.gpio) return backend;
-  auto lines = std::make_unique<hal::GpiodLines>(*cfg.hal.gpio);
+  if (!lines) return backend;
   return std::make_unique<hal::InterlockedHal>(std::move(backend), std::move(lines), cfg.safety.sensor_timeout_cycles);
 }
 

@@ -31,7 +31,8 @@ void replace_once(std::string& text, const std::string& from, const std::string&
 }
 
 /// The shipped lab configuration, pointed at the plant server on loopback at 100 Hz.
-std::string loopback_config(const std::string& dir, int port, int unit_id = 1, bool tolerate_stalls = false) {
+std::string loopback_config(const std::string& dir, int port, int unit_id = 1, bool tolerate_stalls = false,
+                            bool keep_gpio = false) {
   std::string text = test::slurp(kModbusConfig);
   replace_once(text, "host = \"192.168.10.20\"", "host = \"127.0.0.1\"");
   replace_once(text, "port = 502", "port = " + std::to_string(port));
@@ -45,7 +46,7 @@ std::string loopback_config(const std::string& dir, int port, int unit_id = 1, b
   }
   const auto gpio = text.find("[hal.gpio]"), safety = text.find("[safety]");
   if (gpio == std::string::npos || safety == std::string::npos) throw std::runtime_error("no [hal.gpio] / [safety]");
-  text.erase(gpio, safety - gpio);
+  if (!keep_gpio) text.erase(gpio, safety - gpio);
   const std::string path = dir + "/pvcgeld.toml";
   std::ofstream(path) << text;
   return path;
@@ -167,7 +168,9 @@ TEST(PvcgeldModbusE2E, ServerKilledMidRunFaultsAndZeroVoltsIsWrittenFirstOnRecon
   EXPECT_EQ(after.front(), (std::vector<std::string>{"W", "10", "0"})) << "0 V before anything else";
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   for (const auto& line : test::read_journal(dir + "/after.txt")) {
-    if (line[0] == "W") EXPECT_EQ(line[2], "0") << "in FAULT the daemon holds 0 V";
+    if (line[0] == "W") {
+      EXPECT_EQ(line[2], "0") << "after a lost link the register stays at 0 V (ramp-down or FAULT) until re-armed";
+    }
   }
   d.child.signal(SIGTERM);
   EXPECT_EQ(d.child.wait(), 3) << "exit code 3: stopped in FAULT\n" << d.err();
@@ -197,4 +200,14 @@ TEST(PvcgeldModbusE2E, WrongUnitIdIsAConfigurationErrorExitCode2) {
   Daemon d(dir, {"--config", loopback_config(dir, server.port(), 9), "--trajectory", "hold:50"});
   EXPECT_EQ(d.child.wait(), 2) << d.err();
   EXPECT_NE(d.err().find("configuration error: hal.modbus.unit_id"), std::string::npos) << d.err();
+}
+
+TEST(PvcgeldModbusE2E, MissingGpioChipIsAConfigurationErrorBeforeTheAmplifierIsTouched) {
+  if (std::filesystem::exists("/dev/gpiochip0")) GTEST_SKIP() << "this machine has a gpiochip0";
+  const std::string dir = test::scratch_dir("e2e_modbus_gpio");
+  PlantServer server({.journal = dir + "/journal.txt"});
+  Daemon d(dir, {"--config", loopback_config(dir, server.port(), 1, false, true), "--trajectory", "hold:50"});
+  EXPECT_EQ(d.child.wait(), 2) << d.err();
+  EXPECT_NE(d.err().find("configuration error: hal.gpio.chip"), std::string::npos) << d.err();
+  EXPECT_TRUE(test::read_journal(dir + "/journal.txt").empty()) << "the interlock is set up before any Modbus request";
 }

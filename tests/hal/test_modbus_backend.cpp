@@ -356,3 +356,26 @@ TEST(ModbusBackend, MonitorDisagreeingWithTheCommandIsAnAmplifierFault) {
   EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
   EXPECT_EQ(backend.write_voltage(0.0), HalStatus::ok);
 }
+
+TEST(ModbusBackend, ALateReplyIsAMissedSampleNotGarbage) {
+  test::RawModbusServer raw;
+  auto cfg = test::plant_modbus_config(raw.port());  // 6 ms per transaction
+  cfg.monitor_voltage.reset();
+  cfg.monitor_current.reset();
+  hal::ModbusBackend backend(cfg);
+  double y = 0;
+  raw.set_mode(test::RawModbusServer::Mode::late_once);
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::timeout);  // the reply comes at 20 ms
+  // The write waits, and the first frame to arrive is the late answer to the read.
+  std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(backend.write_voltage(0.0), HalStatus::timeout);
+  std::this_thread::sleep_for(10ms);  // the write's own answer arrives meanwhile and is flushed
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
+  EXPECT_NEAR(y, 0.1, 1e-9);
+  EXPECT_EQ(backend.write_voltage(0.0), HalStatus::ok);
+  const auto c = backend.counters();
+  EXPECT_EQ(c.late_replies, 1u);
+  EXPECT_EQ(c.timeouts, 2u);
+  EXPECT_EQ(c.garbage_frames, 0u);
+  EXPECT_TRUE(backend.link_up());
+}

@@ -7,12 +7,14 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <initializer_list>
 #include <cstdint>
 #include <stdexcept>
@@ -22,7 +24,9 @@ namespace pvcgel::test {
 
 class RawModbusServer {
  public:
-  enum class Mode : int { correct, garbage, exception };
+  /// correct; garbage (malformed frames); exception (server device failure);
+  /// late_once (the next reply correct but 20 ms late, then correct).
+  enum class Mode : int { correct, garbage, exception, late_once };
 
   RawModbusServer() {
     listen_fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -73,6 +77,8 @@ class RawModbusServer {
       if (!wait_readable(listen_fd_)) continue;
       const int fd = ::accept(listen_fd_, nullptr, nullptr);
       if (fd < 0) continue;
+      const int one = 1;  // as any Modbus server: no Nagle delay on small replies
+      ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
       std::uint8_t hdr[7], pdu[260];
       unsigned variant = 0;
       while (!stop_ && read_exact(fd, hdr, 7)) {
@@ -99,6 +105,10 @@ class RawModbusServer {
               break;
           }
         } else {
+          if (mode == Mode::late_once) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            mode_.store(Mode::correct);
+          }
           reply(hdr[6], fc, pdu, body);
         }
         std::array<std::uint8_t, 300> frame;
