@@ -51,6 +51,8 @@ class RawModbusServer {
   void set_mode(Mode m) { mode_.store(m); }
   /// Requests answered with a malformed frame or an exception so far.
   [[nodiscard]] int bad_replies() const { return bad_replies_.load(); }
+  /// Requests received so far.
+  [[nodiscard]] int requests() const { return requests_.load(); }
 
  private:
   bool wait_readable(int fd) const {
@@ -84,6 +86,7 @@ class RawModbusServer {
       while (!stop_ && read_exact(fd, hdr, 7)) {
         const size_t len = static_cast<size_t>(hdr[4] << 8 | hdr[5]);
         if (len < 2 || len > 254 || !read_exact(fd, pdu, len - 1)) break;
+        ++requests_;
         const std::uint8_t fc = pdu[0];
         Frame body;  // unit id onwards
         const Mode mode = mode_.load();
@@ -147,7 +150,7 @@ class RawModbusServer {
   int port_ = 0;
   std::atomic<bool> stop_{false};
   std::atomic<Mode> mode_{Mode::correct};
-  std::atomic<int> bad_replies_{0};
+  std::atomic<int> bad_replies_{0}, requests_{0};
   std::thread thread_;
 };
 
