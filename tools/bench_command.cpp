@@ -178,13 +178,15 @@ void add_diagnose_bench(CLI::App& bench) {
   struct Args {
     int cases = 44;
     std::uint64_t seed = 7;
+    std::string save;
   };
   auto args = std::make_shared<Args>();
   auto* cmd = bench.add_subcommand("diagnose", "Blind suite for pvcgel diagnose: concealed effects, confusion matrix, accuracy");
   cmd->add_option("--cases", args->cases, "number of cases (every effect and none, evenly)")->capture_default_str()->check(CLI::Range(11, 10000));
   cmd->add_option("--seed", args->seed, "suite seed")->capture_default_str();
+  cmd->add_option("--save", args->save, "also write the cases as recordings to DIR (labels apart, in labels.csv)");
   cmd->callback([args] {
-    const auto r = run_blind_suite(args->cases, args->seed, std::cout);
+    const auto r = run_blind_suite(args->cases, args->seed, std::cout, {}, args->save);
     std::cout << format_suite(r);
   });
 }

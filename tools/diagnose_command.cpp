@@ -99,7 +99,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   // Data files: t, y, y_baseline, y_fitted, residual_baseline, residual_fitted, u, du/dt, direction
   for (size_t i = 0; i < R; ++i) {
     std::ostringstream d;
-    d << "# t_s y_um y_baseline y_fitted res_baseline res_fitted u_V du_dt_V_per_s rising\n";
+    d << "# t_s y_um y_baseline y_fitted res_baseline res_fitted u_V du_dt_V_per_s rising held_out\n";
     const auto& s = data[i];
     const size_t st = stride(s.t_s.size());
     for (size_t k = 0; k < s.t_s.size(); k += st) {
@@ -108,7 +108,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
       const int rising = s.u_V[kn] >= s.u_V[k] ? 1 : 0;
       d << s.t_s[k] << ' ' << s.y_um[k] << ' ' << r.y_baseline_um[i][k] << ' ' << r.y_fitted_um[i][k] << ' '
         << s.y_um[k] - r.y_baseline_um[i][k] << ' ' << s.y_um[k] - r.y_fitted_um[i][k] << ' ' << s.u_V[k] << ' ' << du
-        << ' ' << rising << '\n';
+        << ' ' << rising << ' ' << static_cast<int>(r.held_out[i][k]) << '\n';
     }
     write_text(dir / ("rec" + std::to_string(i) + ".dat"), d.str());
   }
@@ -155,11 +155,9 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   gp << "set output '" << (dir / "validation.png").string() << "'\nset terminal pngcairo size 1200," << 360 * R
      << " font ',10'\nset multiplot layout " << rows
      << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
-  for (size_t i = 0; i < R; ++i) {
-    const double t0 = data[i].t_s[std::min(r.validation_start[i], data[i].t_s.size() - 1)];
-    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i) << " u ($1>=" << t0
-       << "?$1:1/0):5 w l lc rgb '#1f77b4' t 'before', '' u ($1>=" << t0 << "?$1:1/0):6 w l lc rgb '#d62728' t 'after'\n";
-  }
+  for (size_t i = 0; i < R; ++i)
+    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
+       << " u 1:($10==1?$5:1/0) w l lc rgb '#1f77b4' t 'before', '' u 1:($10==1?$6:1/0) w l lc rgb '#d62728' t 'after'\n";
   gp << "unset multiplot\n";
   write_text(dir / "diagnose.gp", gp.str());
   run_gnuplot(dir / "diagnose.gp");
@@ -250,6 +248,11 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   const std::string model_keys = "poly = " + toml_array(m.f.coefficients()) + "\nG_num = " + toml_array(m.G.num()) +
                                  "\nG_den = " + toml_array(m.G.den()) + "\n";
   s << "[model]\n" << model_keys << "io_delay_samples = " << lm.io_delay_samples << "\n\n";
+  if (const auto turn = m.f.first_turnover(1000.0)) {
+    // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
+    s << "# f turns over at " << num(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
+      << num(std::floor(0.99 * *turn), "%.0f") << "\n\n";
+  }
   s << "[sim]\nio_delay_samples = " << lm.io_delay_samples << "\nnoise_sigma_um = " << num(r.noise_sigma_um, "%.4g")
     << "\nquantization_um = 0.0\n\n"
     << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effect replaces them.\n"
@@ -296,8 +299,8 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
   j << "\n  ],\n  \"recordings\": [";
   for (size_t i = 0; i < recordings.size(); ++i)
     j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
-      << ", \"validation_start_index\": " << r.validation_start[i] << "}";
-  j << "],\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << num(cpu) << "\n}\n";
+      << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
+  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << num(cpu) << "\n}\n";
   return j.str();
 }
 
@@ -385,7 +388,7 @@ void add_diagnose_command(CLI::App& app) {
       "diagnose",
       "Locate the sim-to-real mismatch in recordings, name the missing physics (hysteresis, creep, dead_zone, "
       "saturation, delay, asymmetric_dynamics, slew_limit, resonance, drift, bias_dependent_dynamics), fit it and "
-      "show the improvement on held-out data (the last 30% of each recording)");
+      "show the improvement on held-out data (the last 3 s of every 10 s of each recording)");
   cmd->add_option("--model", args->model, "TOML file with the [model] table (or a full daemon config)")
       ->required()->check(CLI::ExistingFile);
   cmd->add_option("--json", args->json, "write the machine-readable report to FILE");

@@ -2,7 +2,11 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <ostream>
+
+#include "tools/ident_command.hpp"
 
 namespace pvcgel::tools {
 
@@ -22,13 +26,34 @@ std::string label_name(int i) {
 
 }  // namespace
 
-BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& log, const GeneratorOptions& options) {
+BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& log, const GeneratorOptions& options,
+                                 const std::string& save_dir) {
+  namespace fs = std::filesystem;
   const auto model = control::paper_model(3);
   BlindSuiteResult r;
+  std::ofstream labels;
+  if (!save_dir.empty()) {
+    fs::create_directories(save_dir);
+    std::ofstream(fs::path(save_dir) / "model.toml") << model_toml(model, "the nominal model of the blind suite (paper n = 3)");
+    labels.open(fs::path(save_dir) / "labels.csv");
+    labels << "recording,effect,magnitude,effect_rms_um,effect_peak_um,closed_loop,input\n";
+  }
   double ratio_sum = 0.0, time_sum = 0.0;
   int ratio_n = 0;
   for (const auto& [kind, case_seed] : blind_suite_plan(cases, seed)) {
     const GeneratedCase c = generate_case(model, kind, case_seed, options);
+    if (labels.is_open()) {
+      char name[32];
+      std::snprintf(name, sizeof name, "case%02d.csv", r.cases + 1);
+      control::identification::SineRecord rec;
+      rec.sample_time_s = c.recordings[0].sample_time_s;
+      rec.t_s = c.recordings[0].t_s;
+      rec.u_V = c.recordings[0].u_V;
+      rec.y_um = c.recordings[0].y_um;
+      write_sine_recording(fs::path(save_dir) / name, rec, {{"source", "pvcgel bench diagnose (blind case; its label is in labels.csv)"}});
+      labels << name << ',' << to_string(kind) << ',' << c.truth.magnitude << ',' << c.truth.effect_rms_um << ','
+             << c.truth.effect_peak_um << ',' << c.truth.closed_loop << ",\"" << c.truth.input << "\"\n";
+    }
     // The diagnosis sees the recordings and the model only.
     const auto t0 = std::chrono::steady_clock::now();
     const DiagnosisResult d = diagnose(model, c.recordings);

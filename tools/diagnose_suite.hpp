@@ -27,9 +27,12 @@ struct BlindSuiteResult {
 };
 
 /// Runs `cases` blind cases (blind_suite_plan(cases, seed)); one line per case
-/// goes to `log` (the truth is printed only after the verdict).
+/// goes to `log` (the truth is printed only after the verdict). With
+/// `save_dir`, every case is also written there as a daemon recording
+/// (caseNN.csv), with the nominal model (model.toml) and, apart, labels.csv.
 BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& log,
-                                 const control::diagnosis::GeneratorOptions& options = {});
+                                 const control::diagnosis::GeneratorOptions& options = {},
+                                 const std::string& save_dir = "");
 
 /// The confusion matrix and the scores as text.
 std::string format_suite(const BlindSuiteResult& r);

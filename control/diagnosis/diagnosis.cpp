@@ -64,9 +64,15 @@ double rest_at_start(AugmentedPlant& plant, const Series& s) {
 
 class Problem {
  public:
-  Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<size_t>& split, int io)
-      : model_(m), data_(d), split_(split), io_(io) {
-    for (size_t r = 0; r < d.size(); ++r) n_fit_ += split[r];
+  Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out, int io)
+      : model_(m), data_(d), held_out_(held_out), io_(io) {
+    for (const auto& mask : held_out) {
+      n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
+      size_t last = 0;
+      for (size_t k = 0; k < mask.size(); ++k)
+        if (!mask[k]) last = k + 1;
+      end_.push_back(last);
+    }
   }
 
   /// Fit-segment residual of `e`; simulates only up to the end of each fit segment.
@@ -78,8 +84,8 @@ class Problem {
       const auto& s = data_[r];
       AugmentedPlant plant(model_, io_, s.sample_time_s, e);
       rest_at_start(plant, s);
-      for (size_t k = 0; k < split_[r]; ++k) {
-        out(j++) = s.y_um[k] - plant.output();
+      for (size_t k = 0; k < end_[r]; ++k) {
+        if (!held_out_[r][k]) out(j++) = s.y_um[k] - plant.output();
         plant.apply(s.u_V[k]);
       }
     }
@@ -90,7 +96,8 @@ class Problem {
  private:
   const HammersteinModel& model_;
   const std::vector<Series>& data_;
-  const std::vector<size_t>& split_;
+  const std::vector<std::vector<char>>& held_out_;
+  std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
   int io_;
   size_t n_fit_ = 0;
   int simulations_ = 0;
@@ -148,13 +155,13 @@ Eigen::VectorXd levenberg_marquardt(Problem& problem, EffectKind kind, const Coo
 }
 
 ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
-                      const std::vector<size_t>& split) {
+                      const std::vector<std::vector<char>>& held_out) {
   SquaredError all, fit, val;
   for (size_t r = 0; r < data.size(); ++r)
     for (size_t k = 0; k < data[r].y_um.size(); ++k) {
       const double e = data[r].y_um[k] - yhat[r][k];
       all.add(e);
-      (k < split[r] ? fit : val).add(e);
+      (held_out[r][k] ? val : fit).add(e);
     }
   return {std::sqrt(all.mse()), std::sqrt(fit.mse()), std::sqrt(val.mse())};
 }
@@ -165,7 +172,38 @@ std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& s
   return s;
 }
 
+/// Starting points that depend on the data: a slew limit only matters below
+/// the fastest recorded voltage rate, a dead zone only where |u| comes low.
+void add_data_starts(EffectKind kind, std::vector<ParameterSpec>& specs, const std::vector<Series>& data) {
+  if (kind == EffectKind::slew_limit) {
+    double rate = 0.0;
+    for (const auto& s : data)
+      for (size_t k = 1; k < s.u_V.size(); ++k) rate = std::max(rate, std::abs(s.u_V[k] - s.u_V[k - 1]) / s.sample_time_s);
+    for (double q : {0.25, 0.4, 0.55, 0.7, 0.8, 0.9, 0.95, 0.98})
+      if (q * rate > specs[0].lower) specs[0].starts.push_back(q * rate);
+  } else if (kind == EffectKind::dead_zone) {
+    std::vector<double> a;
+    for (const auto& s : data)
+      for (double u : s.u_V) a.push_back(std::abs(u));
+    auto q = a.begin() + static_cast<std::ptrdiff_t>(a.size() / 50);
+    std::nth_element(a.begin(), q, a.end());
+    const double u_lo = *q;
+    if (u_lo < 1.0) return;
+    for (double f : {0.1, 0.3, 0.6}) specs[0].starts.push_back(f * u_lo);
+    for (double f : {0.3, 0.7, 1.0, 1.3}) specs[1].starts.push_back(f * u_lo);
+  }
+}
+
 }  // namespace
+
+std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) {
+  auto block = static_cast<size_t>(std::lround(o.validation_block_s / Ts));
+  if (block == 0 || n < 2 * block) block = n;
+  const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(block)));
+  std::vector<char> mask(n);
+  for (size_t k = 0; k < n; ++k) mask[k] = (k % block) >= fitted ? 1 : 0;
+  return mask;
+}
 
 double estimate_noise_sigma(const std::vector<double>& y) {
   if (y.size() < 8) return 0.0;
@@ -266,10 +304,8 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
                                         " V, inside the recorded voltage range (|u| up to " + fmt("%.1f", u_max) + " V)");
 
   DiagnosisResult res;
-  std::vector<size_t> split;
-  for (const auto& s : data)
-    split.push_back(static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(s.u_V.size()))));
-  res.validation_start = split;
+  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+  const auto& split = res.held_out;
 
   // 1. Simulate the nominal model (output error, from rest at u[0]).
   res.y_baseline_um = simulate(model, {}, data, o.io_delay_samples);
@@ -345,6 +381,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     CandidateResult c;
     c.effect.kind = kind;
     c.specs = parameter_specs(kind, data.front().sample_time_s, duration);
+    add_data_starts(kind, c.specs, data);
     Coordinates coords{c.specs};
     std::vector<Start> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(c.specs.size()))}};
     for (size_t i = 0; i < c.specs.size(); ++i) {

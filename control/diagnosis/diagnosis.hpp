@@ -23,7 +23,9 @@ struct Series {
 /// Tuning of the decision rules (defaults are what `pvcgel diagnose` uses).
 struct DiagnosisOptions {
   int io_delay_samples = 1;           ///< the model's I/O delay (samples), as `[model] io_delay_samples`
-  double validation_fraction = 0.3;   ///< last fraction of each recording held out
+  double validation_fraction = 0.3;   ///< share of every block held out (its end)
+  double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block (the whole
+                                      ///< recording as one block when shorter than two blocks)
   double window_s = 1.0;              ///< localisation window
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
@@ -71,11 +73,14 @@ struct DiagnosisResult {
   std::vector<CandidateResult> candidates;  ///< ranked best first (fitted ones by score, then the rest by evidence)
   std::vector<MismatchWindow> mismatch;
   std::vector<std::vector<double>> y_baseline_um, y_fitted_um;  ///< per recording
-  std::vector<size_t> validation_start;  ///< first held-out sample per recording
+  std::vector<std::vector<char>> held_out;  ///< per recording and sample: 1 when held out (validation)
   std::vector<double> window_centre_s, window_rms_um;  ///< all windows of all recordings (for plots)
   std::vector<int> window_recording;
   int simulations = 0;
 };
+
+/// Which samples of an n-sample recording are held out (1) rather than fitted (0).
+std::vector<char> held_out_mask(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
 
 /// Sensor-noise standard deviation from the data: robust (median) scale of
 /// the second differences of y, which the slow actuator dynamics leave to the noise.

@@ -44,6 +44,12 @@ TransferFunction linear_block(const TransferFunction& G, const Effect& e) {
   return G;
 }
 
+/// No response up to d, linear catch-up to u over the next w volts, then u.
+double dead_zone(double u, double d, double w) noexcept {
+  const double a = std::abs(u);
+  return std::copysign(a <= d ? 0.0 : (a <= d + w ? (a - d) * (d + w) / w : a), u);
+}
+
 }  // namespace
 
 std::string_view to_string(EffectKind kind) noexcept { return kNames[static_cast<size_t>(kind)]; }
@@ -61,7 +67,8 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, double Ts, double du
       return {{"alpha", 0.0, 1.0, false, {0.005, 0.02, 0.06}}, {"threshold_scale_V", 0.5, 500.0, true, {3, 10, 30, 100}}};
     case EffectKind::creep:
       return {{"fraction", -0.3, 0.3, false, {0.003, -0.003}}, {"time_constant_s", 0.1, 300.0, true, {0.5, 2, 8, 30}}};
-    case EffectKind::dead_zone: return {{"threshold_V", 0.0, 400.0, false, {3, 6, 12, 25, 50, 100, 200}}};
+    case EffectKind::dead_zone:
+      return {{"threshold_V", 0.0, 400.0, false, {3, 10, 30, 80, 150}}, {"catch_up_V", 0.5, 400.0, true, {5, 30, 100}}};
     case EffectKind::saturation:
       return {{"knee_um", 0.0, 5000.0, false, {0, 100, 250}}, {"softness_um", 20.0, 1e6, true, {300, 1000, 4000}}};
     case EffectKind::delay: {
@@ -83,7 +90,8 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, double Ts, double du
       return {{"offset_um", -100.0, 100.0, false, {0.0}},
               {"rate_um_per_s", -20.0, 20.0, false, {-0.01, 0.01}},
               {"onset_s", 0.0, std::max(duration_s, 0.0), false, {0.0, 0.25 * duration_s, 0.5 * duration_s}}};
-    case EffectKind::bias_dependent_dynamics: return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}}};
+    case EffectKind::bias_dependent_dynamics:
+      return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}}, {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}}};
   }
   return {};
 }
@@ -154,6 +162,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, int io_delay, doub
     D_ = d.D;
   }
   dc_gain_ = model.G.dc_gain();
+  if (e.kind == EffectKind::bias_dependent_dynamics) op_gain_ = e.p[1] > 0.0 ? 1.0 - std::exp(-Ts / e.p[1]) : 1.0;
   y_ref_ = std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
   x_ = Vector::Zero(ss.order());
   reset_steady_state(0.0);
@@ -161,7 +170,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, int io_delay, doub
 
 double AugmentedPlant::time_scale(double w) const noexcept {
   if (e_.kind == EffectKind::asymmetric_dynamics) return dc_gain_ * w < y_lin_ ? 1.0 : 0.0;  // grid index
-  return std::clamp(1.0 + e_.p[0] * y_lin_ / y_ref_, 0.25, 4.0);
+  return std::clamp(1.0 + e_.p[0] * y_op_ / y_ref_, 0.25, 4.0);
 }
 
 double AugmentedPlant::output_stage(double y, long sample) const noexcept {
@@ -181,17 +190,13 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   sample_ = 0;
   // u once through the static input stage, play operators virgin.
   double x = u;
-  if (e_.kind == EffectKind::dead_zone) {
-    const double d = e_.p[0], a = std::abs(u);
-    x = a <= d ? 0.0 : (a <= 2 * d ? 2 * (a - d) : a);
-    x = std::copysign(x, u);
-  }
+  if (e_.kind == EffectKind::dead_zone) x = dead_zone(u, e_.p[0], e_.p[1]);
   plays_.fill(x);
   const double w = nonlinearity(x);
   const size_t unit = e_.kind == EffectKind::bias_dependent_dynamics ? 20 : 0;
   const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());
   x_ = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
-  y_lin_ = C_.dot(x_) + D_ * w;
+  y_lin_ = y_op_ = C_.dot(x_) + D_ * w;
   y_ = output_stage(y_lin_, 0);
 }
 
@@ -207,16 +212,18 @@ void AugmentedPlant::apply(double u) noexcept {
 
   switch (e_.kind) {
     case EffectKind::slew_limit: {
-      const double step = e_.p[0] * Ts_;
-      slew_state_ += std::clamp(x - slew_state_, -step, step);
-      x = slew_state_;
+      // The amplifier ramps at the slew rate inside the sample: hold its mean over the sample.
+      const double cap = e_.p[0] * Ts_, e = x - slew_state_;
+      if (std::abs(e) <= cap) {
+        x -= 0.5 * e * std::abs(e) / cap;
+        slew_state_ += e;
+      } else {
+        x = slew_state_ + std::copysign(0.5 * cap, e);
+        slew_state_ += std::copysign(cap, e);
+      }
       break;
     }
-    case EffectKind::dead_zone: {
-      const double d = e_.p[0], a = std::abs(x);
-      x = std::copysign(a <= d ? 0.0 : (a <= 2 * d ? 2 * (a - d) : a), x);
-      break;
-    }
+    case EffectKind::dead_zone: x = dead_zone(x, e_.p[0], e_.p[1]); break;
     case EffectKind::hysteresis: {
       double lag = 0.0;
       for (int i = 0; i < kPlays; ++i) {
@@ -247,6 +254,7 @@ void AugmentedPlant::apply(double u) noexcept {
     x_ = next;
   }
   y_lin_ = C_.dot(x_) + D_ * w;
+  y_op_ += op_gain_ * (y_lin_ - y_op_);
   ++sample_;
   y_ = output_stage(y_lin_, sample_);
 }

@@ -142,6 +142,7 @@ class AugmentedPlant final {
   double slew_state_ = 0.0;
   long sample_ = 0;
   double y_lin_ = 0.0, y_ = 0.0;
+  double y_op_ = 0.0, op_gain_ = 1.0;  ///< operating point (low-passed displacement) for bias-dependent dynamics
 };
 
 }  // namespace pvcgel::control::diagnosis

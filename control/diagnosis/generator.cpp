@@ -68,7 +68,7 @@ class TruthPlant {
     const double y = C_.dot(X_.head(n_)) + D_ * w;
     X_(n_) = 0.6 * e_.m * G0_ * w;  // creep elements
     X_(n_ + 1) = 0.4 * e_.m * G0_ * w;
-    X_(n_ + 2) = u;  // amplifier voltage (slew)
+    amplifier_start_ = u;
     X_(n_ + 6) = y;  // low-passed displacement (operating point)
     X_(n_ + 4) = y;  // mode position and velocity
     X_(n_ + 5) = 0.0;
@@ -77,7 +77,7 @@ class TruthPlant {
 
   [[nodiscard]] double true_output() const {
     if (rig_) return rig_->true_displacement_um();
-    const double w = static_input(e_.kind == EffectKind::slew_limit ? X_(n_ + 2) : u_held_);
+    const double w = static_input(amplifier_start_);
     double y = C_.dot(X_.head(n_)) + D_ * w;
     switch (e_.kind) {
       case EffectKind::creep: y += X_(n_) + X_(n_ + 1); break;
@@ -106,12 +106,14 @@ class TruthPlant {
     constexpr int kSub = 4;
     const double h = Ts_ / kSub;
     for (int i = 0; i < kSub; ++i) {
-      const Eigen::VectorXd k1 = derivative(X_);
-      const Eigen::VectorXd k2 = derivative(X_ + 0.5 * h * k1);
-      const Eigen::VectorXd k3 = derivative(X_ + 0.5 * h * k2);
-      const Eigen::VectorXd k4 = derivative(X_ + h * k3);
+      const double tau = i * h;
+      const Eigen::VectorXd k1 = derivative(X_, tau);
+      const Eigen::VectorXd k2 = derivative(X_ + 0.5 * h * k1, tau + 0.5 * h);
+      const Eigen::VectorXd k3 = derivative(X_ + 0.5 * h * k2, tau + 0.5 * h);
+      const Eigen::VectorXd k4 = derivative(X_ + h * k3, tau + h);
       X_ += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
     }
+    amplifier_start_ = amplifier(Ts_);
     t_ += Ts_;
   }
 
@@ -122,9 +124,16 @@ class TruthPlant {
     return f_(std::min(x, x_sat_));
   }
 
-  [[nodiscard]] Eigen::VectorXd derivative(const Eigen::VectorXd& X) const {
+  /// Amplifier voltage tau into the sample: a continuous ramp at the slew rate toward the command.
+  [[nodiscard]] double amplifier(double tau) const {
+    if (e_.kind != EffectKind::slew_limit) return u_held_;
+    const double e = u_held_ - amplifier_start_;
+    return amplifier_start_ + std::copysign(std::min(std::abs(e), tau / e_.m), e);
+  }
+
+  [[nodiscard]] Eigen::VectorXd derivative(const Eigen::VectorXd& X, double tau) const {
     Eigen::VectorXd d = Eigen::VectorXd::Zero(X.size());
-    const double ua = e_.kind == EffectKind::slew_limit ? X(n_ + 2) : u_held_;
+    const double ua = amplifier(tau);
     const double w = static_input(ua);
     const auto xg = X.head(n_);
     const double y_lin = C_.dot(xg) + D_ * w;
@@ -137,10 +146,6 @@ class TruthPlant {
     if (e_.kind == EffectKind::creep) {
       d(n_) = (0.6 * e_.m * G0_ * w - X(n_)) / tau1;
       d(n_ + 1) = (0.4 * e_.m * G0_ * w - X(n_ + 1)) / tau2;
-    }
-    if (e_.kind == EffectKind::slew_limit) {
-      const double S = 1.0 / e_.m, tau_a = 5e-4;
-      d(n_ + 2) = S * std::tanh((u_held_ - X(n_ + 2)) / (S * tau_a));
     }
     d(n_ + 6) = (y_lin - X(n_ + 6)) / 0.5;
     if (e_.kind == EffectKind::resonance) {
@@ -167,6 +172,7 @@ class TruthPlant {
   Eigen::VectorXd X_;
   std::vector<double> line_;
   double u_held_ = 0.0, t_ = 0.0;
+  double amplifier_start_ = 0.0;  ///< amplifier voltage at the start of this sample
 };
 
 /// An excitation: open-loop voltage u(t) or a closed-loop reference r(t).
@@ -311,14 +317,14 @@ Run run_case(const HammersteinModel& model, const GeneratorOptions& o, const Tru
 std::pair<double, double> effect_size(const HammersteinModel& model, const GeneratorOptions& o, const Run& run) {
   AugmentedPlant nominal(model, o.io_delay_samples, o.sample_time_s, {});
   const auto y0 = nominal.simulate(run.series.u_V, run.initial_V);
-  const auto start = static_cast<size_t>((1.0 - o.validation_fraction) * static_cast<double>(y0.size()));
-  double sum = 0.0, peak = 0.0;
+  const auto held_out = held_out_mask(y0.size(), o.sample_time_s);
+  double sum = 0.0, peak = 0.0, n = 0.0;
   for (size_t k = 0; k < y0.size(); ++k) {
     const double d = run.y_true[k] - y0[k];
     peak = std::max(peak, std::abs(d));
-    if (k >= start) sum += d * d;
+    if (held_out[k]) sum += d * d, n += 1.0;
   }
-  return {std::sqrt(sum / static_cast<double>(y0.size() - start)), peak};
+  return {std::sqrt(sum / std::max(n, 1.0)), peak};
 }
 
 TruthEffect draw_shape(EffectKind kind, std::mt19937_64& rng, double duration_s) {

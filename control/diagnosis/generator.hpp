@@ -11,7 +11,8 @@
 ///  - dead_zone: smooth threshold x = u (1 - exp(-(u/d)^4));
 ///  - saturation: y -> tanh(s y) / s;
 ///  - asymmetric_dynamics: time scale 1 + m (1 + tanh(e / 0.2 um)) / 2, e = y - G(0) w;
-///  - slew_limit: amplifier u' = S tanh((u_cmd - u) / (S tau_a)), tau_a = 0.5 ms;
+///  - slew_limit: the amplifier voltage ramps continuously at S toward each new
+///    command inside the sample (the candidate holds one value per sample);
 ///  - resonance: the measured output follows the gel through a mode
 ///    q'' = w_n^2 (y - q) - 2 zeta w_n q' (output side; the candidate's mode is on the input side);
 ///  - drift: m (1 - exp(-(t - t0) / tau_d)) after an onset t0;
@@ -32,17 +33,16 @@ struct GeneratorOptions {
   int io_delay_samples = 1;
   double noise_sigma_um = 0.05;
   double quantization_um = 0.01;
-  double effect_rms_min = 3.0;  ///< target effect RMS on the held-out segment, in noise sigmas
+  double effect_rms_min = 3.0;  ///< target effect RMS on the held-out samples (held_out_mask), in noise sigmas
   double effect_rms_max = 6.0;
   double closed_loop_probability = 0.3;
-  double validation_fraction = 0.3;  ///< the segment the effect RMS is measured on
 };
 
 /// What was generated (kept apart from the recordings: the diagnosis never sees it).
 struct GroundTruth {
   EffectKind effect = EffectKind::none;
   double magnitude = 0.0;           ///< the generator's own magnitude parameter
-  double effect_rms_um = 0.0;       ///< RMS of (true output - nominal model) on the held-out segment
+  double effect_rms_um = 0.0;       ///< RMS of (true output - nominal model) on the held-out samples
   double effect_peak_um = 0.0;      ///< largest |true output - nominal model|
   double stroke_um = 0.0;
   bool closed_loop = false;

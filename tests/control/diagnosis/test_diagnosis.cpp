@@ -113,7 +113,7 @@ TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
     FAIL();
   } catch (const std::invalid_argument& e) {
     EXPECT_STREQ(e.what(),
-                 "recording lasts 5 s, shorter than 3 time constants of G's slowest pole (5.66 s): the output-error "
+                 "recording lasts 5 s, shorter than 3 time constants of G's slowest pole (5.68 s): the output-error "
                  "simulation cannot be judged");
   }
 }

@@ -72,7 +72,7 @@ TEST(AugmentedPlant, CreepAddsASlowFirstOrderBranch) {
 }
 
 TEST(AugmentedPlant, DeadZoneHasNoResponseBelowTheThresholdAndNominalAboveTwice) {
-  const Effect e{EffectKind::dead_zone, {30.0}};
+  const Effect e{EffectKind::dead_zone, {30.0, 30.0}};
   EXPECT_NEAR(run(e, steps(20000, 0.0, 25.0), 0.0).back(), 0.0, 1e-12);
   EXPECT_NEAR(run(e, steps(20000, 0.0, 80.0), 0.0).back(), run({}, steps(20000, 0.0, 80.0), 0.0).back(), 1e-6);
   EXPECT_LT(run(e, steps(20000, 0.0, 45.0), 0.0).back(), run({}, steps(20000, 0.0, 45.0), 0.0).back());
@@ -108,10 +108,13 @@ TEST(AugmentedPlant, AsymmetricDynamicsSlowsTheRelaxation) {
 
 TEST(AugmentedPlant, SlewLimitRampsTheVoltage) {
   const Effect e{EffectKind::slew_limit, {1000.0}};
-  const auto y = run(e, steps(3000, 200.0, 300.0), 200.0);
-  // The same as the nominal model driven by a 0.1 s ramp.
-  std::vector<double> ramp(3000);
-  for (size_t k = 0; k < ramp.size(); ++k) ramp[k] = k == 0 ? 200.0 : std::min(300.0, 200.0 + 1.0 * static_cast<double>(k));
+  const auto y = run(e, steps(3000, 200.0, 300.5), 200.0);
+  // The same as the nominal model driven by the sample means of a 1 V/sample
+  // ramp: 200.5, 201.5, ..., 299.5, then 300.375 (0.5 V reached in half a sample).
+  std::vector<double> ramp(3000, 300.5);
+  ramp[0] = 200.0;
+  for (size_t k = 1; k <= 100; ++k) ramp[k] = 199.5 + static_cast<double>(k);
+  ramp[101] = 300.5 - 0.5 * 0.5 * 0.5;
   const auto y_ramp = run({}, ramp, 200.0);
   for (size_t k = 0; k < y.size(); ++k) ASSERT_NEAR(y[k], y_ramp[k], 1e-9) << k;
 }
@@ -138,9 +141,9 @@ TEST(AugmentedPlant, DriftIsAnInputIndependentRampAfterItsOnset) {
 
 TEST(AugmentedPlant, BiasDependentDynamicsAreSlowerAtHigherDisplacement) {
   const Effect e{EffectKind::bias_dependent_dynamics, {1.0}};
-  const auto u = steps(20000, 0.0, 500.0);
+  const auto u = steps(60000, 0.0, 500.0);
   const auto y = run(e, u, 0.0), y0 = run({}, u, 0.0);
-  EXPECT_NEAR(y.back(), y0.back(), 1e-3);  // same static gain
+  EXPECT_NEAR(y.back(), y0.back(), 1e-3);  // same static gain (after ~15 slowed time constants)
   EXPECT_LT(y[500], y0[500] - 1.0);        // slower on the way up
 }
 
@@ -153,7 +156,7 @@ TEST(AugmentedPlant, RestVoltageInvertsTheSteadyState) {
 
 TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
   try {
-    AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::dead_zone, {-3.0}});
+    AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::dead_zone, {-3.0, 10.0}});
     FAIL() << "no error";
   } catch (const ConfigError& e) {
     EXPECT_EQ(e.key(), "effect.threshold_V");
