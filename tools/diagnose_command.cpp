@@ -125,7 +125,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   // Residual over time with the mismatch windows shaded.
   gp << "set output '" << (dir / "residual.png").string() << "'\nset multiplot layout " << rows
      << ",1 title 'Residual of the nominal model; shaded: located mismatch windows; dashed: +-2 sigma noise'\n"
-     << "set ylabel 'y - y_model (um)'\n";
+     << "set ylabel 'y minus model (um)'\n";
   for (size_t i = 0; i < R; ++i) {
     int obj = 1;
     for (const auto& w : r.mismatch)
@@ -146,7 +146,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   if (axis == RegimeAxis::voltage_rate) col = "8", xlabel = "du/dt (V/s)";
   gp << "set output '" << (dir / "residual_vs_regime.png").string() << "'\nset terminal pngcairo size 1000,600\n"
      << "set title 'Nominal-model residual vs the regime variable, split by direction of the voltage'\nset xlabel '" << xlabel
-     << "'\nset ylabel 'y - y_model (um)'\nplot ";
+     << "'\nset ylabel 'y minus model (um)'\nplot ";
   for (size_t i = 0; i < R; ++i)
     gp << (i ? ", " : "") << dat(i) << " u " << col << ":($9==1?$5:1/0) w p pt 7 ps 0.3 lc rgb '#d62728' t '" << (i ? "" : "u rising")
        << "', " << dat(i) << " u " << col << ":($9==0?$5:1/0) w p pt 7 ps 0.3 lc rgb '#1f77b4' t '" << (i ? "" : "u falling") << "'";
