@@ -55,6 +55,17 @@ TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
   ASSERT_FALSE(r.mismatch.empty());
 }
 
+TEST(Diagnose, FitsOneEffectAcrossSeveralRecordings) {
+  const Effect truth{EffectKind::hysteresis, {0.03, 15.0}};
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05, 4, 12.0), recording(truth, 0.05, 5, 20.0)});
+  ASSERT_EQ(r.verdict, "hysteresis") << r.explanation;
+  ASSERT_EQ(r.y_fitted_um.size(), 2u);
+  EXPECT_EQ(r.y_fitted_um[0].size(), 12000u);
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.06);
+  EXPECT_NEAR(r.effect.p[0], 0.03, 0.006);
+  EXPECT_NEAR(r.effect.p[1], 15.0, 3.0);
+}
+
 TEST(Diagnose, RecoversAWholeSampleDelay) {
   const auto r = diagnose(paper_model(3), {recording({EffectKind::delay, {2 * Ts}}, 0.05)});
   ASSERT_EQ(r.verdict, "delay") << r.explanation;
