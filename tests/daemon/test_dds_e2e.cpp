@@ -25,6 +25,8 @@ const std::string kDaemon = PVCGELD_PATH;
 const std::string kClient = PVCGEL_PATH;
 const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclonedds-loopback.xml";
 const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
+/// This process's DDS domain (each test runs in its own process under ctest).
+const int kDomain = test::unique_dds_domain();
 
 /// A daemon config: the shipped sim config, idle at start, on `domain` as `rig`.
 std::string write_config(const std::string& name, int domain, const std::string& rig, const std::string& extra = "",
@@ -63,8 +65,8 @@ tools::ClientOptions options(int domain, const std::string& rig) {
 // The paper's four references, each a one-line `pvcgel send`, recorded
 // losslessly with `pvcgel record`; tracking as in the daemon issue's figures.
 TEST(DdsE2E, EachPaperReferenceIsSentRecordedAndTracked) {
-  Process daemon(kDaemon, {"--config", write_config("paper", 11, "paper")});
-  ASSERT_EQ(client({"start"}, 11, "paper").exit_code, 0);
+  Process daemon(kDaemon, {"--config", write_config("paper", kDomain, "paper")});
+  ASSERT_EQ(client({"start"}, kDomain, "paper").exit_code, 0);
   struct Ref {
     const char* name;
     double bench_mean_um;  // `pvcgel bench paper`, inverse_pid_dob, mean |e|
@@ -72,11 +74,11 @@ TEST(DdsE2E, EachPaperReferenceIsSentRecordedAndTracked) {
   };
   for (const Ref ref : {Ref{"0.1Hz", 0.076, 20.0}, Ref{"0.5Hz", 0.435, 45.0}, Ref{"1Hz", 0.886, 45.0}, Ref{"multi", 0.435, 30.0}}) {
     SCOPED_TRACE(ref.name);
-    const auto sent = client({"send", "paper", ref.name, "--blend", "1"}, 11, "paper");
+    const auto sent = client({"send", "paper", ref.name, "--blend", "1"}, kDomain, "paper");
     ASSERT_EQ(sent.exit_code, 0) << sent.err;
     std::this_thread::sleep_for(std::chrono::seconds(2));  // blend and settle
     const std::string out = ::testing::TempDir() + "dds_paper_" + ref.name + ".csv";
-    const auto rec_run = client({"record", "--out", out, "--duration", "5"}, 11, "paper");
+    const auto rec_run = client({"record", "--out", out, "--duration", "5"}, kDomain, "paper");
     ASSERT_EQ(rec_run.exit_code, 0) << rec_run.err;  // exit 5 would mean sequence gaps
     const auto rec = tools::read_recording(out);
     EXPECT_GE(rec.rows(), 5000u);
@@ -99,12 +101,12 @@ TEST(DdsE2E, EachPaperReferenceIsSentRecordedAndTracked) {
 
 // Several rigs on one domain, told apart by the rig id key.
 TEST(DdsE2E, TwoDaemonsOnOneDomainOnlyTheAddressedRigActs) {
-  Process left(kDaemon, {"--config", write_config("left", 12, "left")});
-  Process right(kDaemon, {"--config", write_config("right", 12, "right")});
-  ASSERT_EQ(client({"start"}, 12, "left").exit_code, 0);
-  const auto sent = client({"send", "hold", "20", "--blend", "1"}, 12, "left");
+  Process left(kDaemon, {"--config", write_config("left", kDomain, "left")});
+  Process right(kDaemon, {"--config", write_config("right", kDomain, "right")});
+  ASSERT_EQ(client({"start"}, kDomain, "left").exit_code, 0);
+  const auto sent = client({"send", "hold", "20", "--blend", "1"}, kDomain, "left");
   ASSERT_EQ(sent.exit_code, 0) << sent.err;
-  tools::DdsClient l(options(12, "left")), r(options(12, "right"));
+  tools::DdsClient l(options(kDomain, "left")), r(options(kDomain, "right"));
   l.connect();
   r.connect();
   std::this_thread::sleep_for(std::chrono::milliseconds(700));
@@ -114,7 +116,7 @@ TEST(DdsE2E, TwoDaemonsOnOneDomainOnlyTheAddressedRigActs) {
   EXPECT_EQ(ls.chunks_accepted, 1u);
   EXPECT_EQ(rs.chunks_accepted, 0u);
   EXPECT_EQ(rs.commands_accepted, 0u);
-  const auto unknown = run_program(kClient, {"status", "--rig", "middle", "--domain", "12", "--dds-config", kDdsConfig, "--wait", "2"});
+  const auto unknown = run_program(kClient, {"status", "--rig", "middle", "--domain", std::to_string(kDomain), "--dds-config", kDdsConfig, "--wait", "2"});
   EXPECT_EQ(unknown.exit_code, 3);
   EXPECT_NE(unknown.err.find("rig 'middle' unknown; rigs seen:"), std::string::npos) << unknown.err;
   EXPECT_EQ(left.stop().exit_code, 0);
@@ -124,13 +126,13 @@ TEST(DdsE2E, TwoDaemonsOnOneDomainOnlyTheAddressedRigActs) {
 // Every validation rule, over DDS: refused with the right reason and counted,
 // while the loop keeps running.
 TEST(DdsE2E, EveryBadInputIsRejectedWithItsReasonAndTheLoopKeepsRunning) {
-  std::string cfg = test::slurp(write_config("validate", 13, "val"));
+  std::string cfg = test::slurp(write_config("validate", kDomain, "val"));
   cfg = std::regex_replace(cfg, std::regex("\nmax_chunk_samples = 1024"), "\nmax_chunk_samples = 256");
   ASSERT_NE(cfg.find("max_chunk_samples = 256"), std::string::npos);
   const std::string cfg_path = ::testing::TempDir() + "validate_256.toml";
   std::ofstream(cfg_path) << cfg;
   Process daemon(kDaemon, {"--config", cfg_path});
-  tools::DdsClient c(options(13, "val"));
+  tools::DdsClient c(options(kDomain, "val"));
   c.connect();
   c.command(daemon::CommandKind::arm);
   c.command(daemon::CommandKind::start);
@@ -208,20 +210,20 @@ TEST(DdsE2E, EveryBadInputIsRejectedWithItsReasonAndTheLoopKeepsRunning) {
 // Open-loop voltage mode for identification: voltage setpoints reach the
 // amplifier, clamped and slew-limited.
 TEST(DdsE2E, OpenLoopVoltageModeDrivesTheAmplifier) {
-  Process daemon(kDaemon, {"--config", write_config("volts", 14, "volts")});
-  ASSERT_EQ(client({"target", "voltage"}, 14, "volts").exit_code, 0);
-  ASSERT_EQ(client({"start"}, 14, "volts").exit_code, 0);
-  const auto sent = client({"send", "sine", "450", "300", "1", "--voltage", "--blend", "0.5"}, 14, "volts");
+  Process daemon(kDaemon, {"--config", write_config("volts", kDomain, "volts")});
+  ASSERT_EQ(client({"target", "voltage"}, kDomain, "volts").exit_code, 0);
+  ASSERT_EQ(client({"start"}, kDomain, "volts").exit_code, 0);
+  const auto sent = client({"send", "sine", "450", "300", "1", "--voltage", "--blend", "0.5"}, kDomain, "volts");
   ASSERT_EQ(sent.exit_code, 0) << sent.err;
   std::this_thread::sleep_for(std::chrono::seconds(1));
   const std::string out = ::testing::TempDir() + "dds_volts.csv";
-  ASSERT_EQ(client({"record", "--out", out, "--duration", "2"}, 14, "volts").exit_code, 0);
+  ASSERT_EQ(client({"record", "--out", out, "--duration", "2"}, kDomain, "volts").exit_code, 0);
   const auto rec = tools::read_recording(out);
   const auto& u = rec.col("u_V");
   const auto [lo, hi] = std::minmax_element(u.begin(), u.end());
   EXPECT_NEAR(*lo, 150.0, 2.0);
   EXPECT_NEAR(*hi, 750.0, 2.0);
-  const auto running = client({"target", "displacement"}, 14, "volts");
+  const auto running = client({"target", "displacement"}, kDomain, "volts");
   EXPECT_EQ(running.exit_code, 4) << "not while RUNNING";
   EXPECT_NE(running.err.find("illegal_in_state"), std::string::npos) << running.err;
   EXPECT_EQ(daemon.stop().exit_code, 0);
@@ -231,13 +233,13 @@ TEST(DdsE2E, OpenLoopVoltageModeDrivesTheAmplifier) {
 // reasons; the loop keeps running and its timing is compared (printed) before
 // and during the flood.
 TEST(DdsE2E, AFloodOfChunksAndCommandsIsThrottledAndTheLoopKeepsItsTiming) {
-  Process daemon(kDaemon, {"--config", write_config("flood", 15, "flood")});
-  tools::DdsClient c(options(15, "flood"));
+  Process daemon(kDaemon, {"--config", write_config("flood", kDomain, "flood")});
+  tools::DdsClient c(options(kDomain, "flood"));
   c.connect();
   c.command(daemon::CommandKind::arm);
   c.command(daemon::CommandKind::start);
   const std::string out = ::testing::TempDir() + "dds_flood.csv";
-  Process recorder(kClient, client_args({"record", "--out", out, "--duration", "15"}, 15, "flood"));
+  Process recorder(kClient, client_args({"record", "--out", out, "--duration", "15"}, kDomain, "flood"));
   std::this_thread::sleep_for(std::chrono::seconds(4));  // baseline
   const double flood_start = c.status().t_s;
   std::vector<double> level{10.0};
@@ -305,14 +307,14 @@ TEST(DdsE2E, SecuredModeAuthenticatesAndEnforcesPermissions) {
   if (std::system("command -v openssl > /dev/null") != 0) GTEST_SKIP() << "skipped: openssl not installed";
   if (std::system("test -e /usr/lib/x86_64-linux-gnu/libddsc0debian/libdds_security_auth.so") != 0)
     GTEST_SKIP() << "skipped: Cyclone DDS Security plugins not installed";
-  const std::string pki = ::testing::TempDir() + "pvcgel_pki";
-  ASSERT_EQ(std::system(("rm -rf " + pki + " && " + PVCGEL_SOURCE_DIR + "/config/dds-security/make-test-pki.sh " + pki +
-                         " 16 > /dev/null")
+  const std::string pki = ::testing::TempDir() + "pvcgel_pki_" + std::to_string(getpid());
+  ASSERT_EQ(std::system(("rm -rf " + pki + " && " + PVCGEL_SOURCE_DIR + "/config/dds-security/make-test-pki.sh " + pki + " " +
+                         std::to_string(kDomain) + " > /dev/null")
                             .c_str()),
             0);
-  Process daemon(kDaemon, {"--config", write_config("secure", 16, "sec", "", pki + "/daemon.xml")});
+  Process daemon(kDaemon, {"--config", write_config("secure", kDomain, "sec", "", pki + "/daemon.xml")});
   const auto with = [&](const std::string& xml, std::vector<std::string> args, const char* wait = "10") {
-    args.insert(args.end(), {"--rig", "sec", "--domain", "16", "--dds-config", xml, "--wait", wait});
+    args.insert(args.end(), {"--rig", "sec", "--domain", std::to_string(kDomain), "--dds-config", xml, "--wait", wait});
     return run_program(kClient, args);
   };
   const auto started = with(pki + "/client.xml", {"start"});
@@ -335,11 +337,11 @@ TEST(DdsE2E, SecuredModeAuthenticatesAndEnforcesPermissions) {
 // voltage mode over DDS; the recordings are kept and the fitted model is one
 // the daemon accepts. (A short plan: one amplitude and bias, four frequencies.)
 TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
-  Process daemon(kDaemon, {"--config", write_config("ident", 17, "ident")});
+  Process daemon(kDaemon, {"--config", write_config("ident", kDomain, "ident")});
   const std::string dir = ::testing::TempDir() + "ident_rig_recordings";
   const std::string model = ::testing::TempDir() + "ident_rig_model.toml";
   std::filesystem::remove_all(dir);
-  const auto r = run_program(kClient, {"ident", "--rig", "ident", "--domain", "17", "--dds-config", kDdsConfig,
+  const auto r = run_program(kClient, {"ident", "--rig", "ident", "--domain", std::to_string(kDomain), "--dds-config", kDdsConfig,
                                        "--amplitudes", "300", "--biases", "450", "--freq-min", "0.3", "--freq-max", "5",
                                        "--freq-count", "4", "--plan-settle", "1.5", "--min-analysed", "2",
                                        "--validation-freqs", "2", "--save-recordings", dir, "--out", model});
@@ -362,7 +364,7 @@ TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
   EXPECT_NEAR(std::max(p1, p2), -0.547, 0.547 * 0.25) << "slow pole (short plan, creep not settled)";
   EXPECT_NEAR(std::min(p1, p2), -16.56, 16.56 * 0.1);
   // The daemon takes the written [model] as it is.
-  std::string cfg = test::slurp(write_config("ident_model", 17, "ident"));
+  std::string cfg = test::slurp(write_config("ident_model", kDomain, "ident"));
   const std::string model_text = test::slurp(model);
   cfg = std::regex_replace(cfg, std::regex(R"(\[model\][\s\S]*?\n\[controller\])"),
                            model_text.substr(model_text.find("[model]")) + "io_delay_samples = 1\n\n[controller]");
@@ -371,7 +373,7 @@ TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
   const auto check = run_program(kDaemon, {"--config", cfg_path, "--check-config"});
   EXPECT_EQ(check.exit_code, 0) << check.err << check.out;
   // The rig is left safe: DISABLED, displacement setpoints.
-  tools::DdsClient c(options(17, "ident"));
+  tools::DdsClient c(options(kDomain, "ident"));
   const auto s = c.fresh_status();
   EXPECT_EQ(s.state, 0);
   EXPECT_EQ(s.target, 0);

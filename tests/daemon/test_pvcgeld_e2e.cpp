@@ -15,7 +15,10 @@ namespace {
 const std::string kDaemon = PVCGELD_PATH;
 const std::string kClient = PVCGEL_PATH;
 const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclonedds-loopback.xml";
-const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
+/// The shipped sim config, publishing on this process's own DDS domain.
+const int kDomain = pvcgel::test::unique_dds_domain();
+const std::string kSimConfig = pvcgel::test::sim_config_on_domain(PVCGEL_SOURCE_DIR, kDomain, "e2e_sim");
+const std::string kDomainArg = std::to_string(kDomain);
 
 using pvcgel::test::Result;
 using pvcgel::test::run_program;
@@ -84,7 +87,7 @@ TEST(PvcgelRecordE2E, LosslessTelemetryRecordingOverDds) {
     EXPECT_EQ(r.exit_code, 0) << r.err;
   });
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "3", "--dds-config", kDdsConfig, "--wait", "10"});
+  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "3", "--dds-config", kDdsConfig, "--domain", kDomainArg, "--wait", "10"});
   daemon.join();
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("sequence gaps 0"), std::string::npos) << r.err;
@@ -97,11 +100,11 @@ TEST(PvcgelRecordE2E, UnknownRigAndNoDaemonAreReported) {
   std::thread daemon([] { (void)run_daemon({"--config", kSimConfig, "--trajectory", "hold:50", "--duration", "3"}); });
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   const auto wrong = run_program(kClient, {"record", "--out", ::testing::TempDir() + "x.csv", "--rig", "rig9",
-                                           "--dds-config", kDdsConfig, "--wait", "2"});
+                                           "--dds-config", kDdsConfig, "--domain", kDomainArg, "--wait", "2"});
   daemon.join();
   EXPECT_NE(wrong.exit_code, 0);
   EXPECT_NE(wrong.err.find("rig 'rig9' unknown; rigs seen: rig1"), std::string::npos) << wrong.err;
-  const auto none = run_program(kClient, {"record", "--out", ::testing::TempDir() + "y.csv", "--dds-config", kDdsConfig,
+  const auto none = run_program(kClient, {"record", "--out", ::testing::TempDir() + "y.csv", "--dds-config", kDdsConfig, "--domain", kDomainArg,
                                           "--wait", "1"});
   EXPECT_NE(none.exit_code, 0);
   EXPECT_NE(none.err.find("no daemon found within"), std::string::npos) << none.err;
@@ -110,7 +113,7 @@ TEST(PvcgelRecordE2E, UnknownRigAndNoDaemonAreReported) {
 TEST(PvcgelRecordE2E, StreamThatStopsEndsTheRecordingWithAnError) {
   const std::string out = ::testing::TempDir() + "e2e_dds_stopped.csv";
   std::thread daemon([] { (void)run_daemon({"--config", kSimConfig, "--trajectory", "hold:50", "--duration", "1"}); });
-  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "30", "--dds-config", kDdsConfig, "--wait", "2"});
+  const auto r = run_program(kClient, {"record", "--out", out, "--duration", "30", "--dds-config", kDdsConfig, "--domain", kDomainArg, "--wait", "2"});
   daemon.join();
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("telemetry stopped"), std::string::npos) << r.err;

@@ -96,4 +96,22 @@ inline Result run_program(const std::string& program, std::vector<std::string> a
   return p.wait();
 }
 
+/// A DDS domain for this test process (30..219): tests that run at the same
+/// time (ctest -j, or two checkouts on one machine) never see each other's daemons.
+inline int unique_dds_domain() { return 30 + static_cast<int>((static_cast<long>(getpid()) * 7) % 190); }
+
+/// The shipped sim config with DDS on `domain` (and the loopback XML by absolute path).
+inline std::string sim_config_on_domain(const std::string& source_dir, int domain, const std::string& name) {
+  std::string text = slurp(source_dir + "/config/pvcgeld-sim.toml");
+  const auto replace = [&text](const std::string& from, const std::string& to) {
+    const auto at = text.find(from);
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+  };
+  replace("\ndomain = 0", "\ndomain = " + std::to_string(domain));
+  replace("config = \"cyclonedds-loopback.xml\"", "config = \"" + source_dir + "/config/cyclonedds-loopback.xml\"");
+  const std::string path = ::testing::TempDir() + name + "_" + std::to_string(getpid()) + ".toml";
+  std::ofstream(path) << text;
+  return path;
+}
+
 }  // namespace pvcgel::test
