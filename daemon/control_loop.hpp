@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "control/controller.hpp"
+#include "daemon/loop_io.hpp"
 #include "daemon/trajectory.hpp"
 #include "hal/hal.hpp"
 
@@ -49,6 +50,7 @@ struct SafetyConfig {
   int overrun_fault_after = 10;       ///< consecutive overruns before a fault (0: never)
   StaleSetpointPolicy stale_setpoint = StaleSetpointPolicy::hold;
   double soft_start_s = 2.0;          ///< blend from the measured position to the trajectory
+  double open_loop_slew_V_per_s = 30000.0;  ///< slew limit on voltage setpoints (open-loop mode)
 };
 
 /// One row of telemetry / recording. Row k: y measured at the start of cycle k
@@ -66,6 +68,9 @@ struct CycleRecord {
   LoopState state = LoopState::disabled;
   FaultReason fault = FaultReason::none;
   bool high_voltage = false;
+  LoopTarget target = LoopTarget::displacement;
+  std::uint64_t chunk_seq = 0;  ///< the received trajectory chunk that set r (0: none / local)
+  std::int64_t stamp_ns = 0;    ///< CLOCK_REALTIME at wake-up (set by the timing thread)
 };
 
 /// The loop's per-cycle logic. `cycle()` is real-time safe.
@@ -92,12 +97,28 @@ class ControlLoop final {
   void set_exit_on_fault(bool v) noexcept { exit_on_fault_ = v; }
   /// Arm and start by itself (a trajectory was given). Otherwise the loop idles
   /// DISABLED at 0 V until a setpoint source starts it.
-  void set_auto_start(bool v) noexcept { auto_start_ = v; }
+  void set_auto_start(bool v) noexcept { auto_start_ = local_trajectory_ = v; }
+  /// Take commands and setpoint segments from `io` (the DDS bridge), check
+  /// them against `limits`, answer through `io.outcomes`, and publish a
+  /// snapshot every cycle. Call before the loop runs.
+  void attach_io(LoopIo& io, const SetpointLimits& limits) noexcept {
+    io_ = &io;
+    limits_ = limits;
+  }
+  /// Displacement (closed loop) or voltage (open loop) setpoints.
+  [[nodiscard]] LoopTarget target() const noexcept { return target_.load(std::memory_order_relaxed); }
 
  private:
   FaultReason check_sensor(hal::HalStatus status, double y) noexcept;
-  double reference_at(double t_s) const noexcept;
+  /// The setpoint before the soft-start blend; false when the received
+  /// setpoints ran dry (the stale-setpoint case).
+  bool base_reference(double t_run, double& value) const noexcept;
+  double reference_at(double t_run) const noexcept;
   void enter_ramp_down(FaultReason why) noexcept;
+  /// Apply queued inputs; `state` may change (arm, stop, reset).
+  void take_inputs(LoopState& state) noexcept;
+  RejectReason apply_command(const LoopInput& in, LoopState& state) noexcept;
+  RejectReason apply_segment(const LoopInput& in, LoopState state) noexcept;
 
   hal::Hal& hal_;
   control::Controller& controller_;
@@ -116,6 +137,18 @@ class ControlLoop final {
   FaultReason pending_fault_ = FaultReason::none;
   bool exit_on_fault_ = false;
   bool auto_start_ = true;
+  bool local_trajectory_ = true;    // play `trajectory_` (until received setpoints take over)
+  bool start_requested_ = false;    // a start command in ARMED
+  bool finish_when_idle_ = false;   // the ramp-down ends the run (duration reached, shutdown)
+  bool schedule_started_ = false;   // received setpoints have played: a gap is a stale setpoint
+  double start_value_ = 0.0;        // where the soft start blends from (um, or V in voltage mode)
+  double hold_value_ = 0.0;         // setpoint held after received setpoints ran dry
+  double setpoint_V_ = 0.0;         // open-loop voltage after the slew limit
+  LoopIo* io_ = nullptr;
+  std::uint32_t refused_ticket_ = 0;  // the rest of this chunk is dropped unanswered
+  SetpointLimits limits_{};
+  SetpointSchedule schedule_{};
+  std::atomic<LoopTarget> target_{LoopTarget::displacement};
   std::atomic<LoopState> state_{LoopState::disabled};
   std::atomic<FaultReason> fault_{FaultReason::none};
   std::atomic<bool> stop_requested_{false};

@@ -30,7 +30,7 @@ DaemonConfig load_daemon_config(const std::string& path) {
   }
 
   DaemonConfig cfg;
-  cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run", "dds"});
+  cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run", "dds", "setpoints"});
   cfg.realtime.period_s = cfg.rig.controller.sample_time_s;
 
   control::with_source(path, [&] {
@@ -69,6 +69,8 @@ DaemonConfig load_daemon_config(const std::string& path) {
     else throw ConfigError(s.key("stale_setpoint"), "must be \"hold\" or \"ramp_down\"");
     sc.soft_start_s = s.number("soft_start_s", sc.soft_start_s);
     if (!(sc.soft_start_s >= 0.0)) throw ConfigError(s.key("soft_start_s"), "must be >= 0");
+    sc.open_loop_slew_V_per_s = s.number("open_loop_slew_V_per_s", sc.open_loop_slew_V_per_s);
+    if (!(sc.open_loop_slew_V_per_s > 0.0)) throw ConfigError(s.key("open_loop_slew_V_per_s"), "must be positive");
     s.finish();
 
     auto run = top.table("run");
@@ -85,6 +87,9 @@ DaemonConfig load_daemon_config(const std::string& path) {
     if (cfg.dds.rig_id.empty() || cfg.dds.rig_id.size() > 32)
       throw ConfigError(d.key("rig_id"), "must be 1..32 characters");
     cfg.dds.reliable_telemetry = d.boolean("reliable_telemetry", false);
+    cfg.dds.telemetry_decimation = d.integer("telemetry_decimation", 1);
+    if (cfg.dds.telemetry_decimation < 1 || cfg.dds.telemetry_decimation > 1000)
+      throw ConfigError(d.key("telemetry_decimation"), "must be 1..1000 (publish every n-th cycle)");
     const std::string xml = d.string("config", "");
     if (cfg.dds_enabled && xml.empty())
       throw ConfigError(d.key("config"), "a Cyclone DDS XML configuration is required when DDS is enabled "
@@ -96,6 +101,35 @@ DaemonConfig load_daemon_config(const std::string& path) {
         throw ConfigError(d.key("config"), "file '" + cfg.dds.config_path + "' not found");
     }
     d.finish();
+
+    auto sp = top.table("setpoints");
+    auto& l = cfg.setpoint_limits;
+    const auto positive = [&](const char* key, double& v) {
+      v = sp.number(key, v);
+      if (!(v > 0.0)) throw ConfigError(sp.key(key), "must be positive");
+    };
+    l.min_um = sp.number("min_um", l.min_um);
+    l.max_um = sp.number("max_um", l.max_um);
+    if (!(l.max_um > l.min_um)) throw ConfigError(sp.key("max_um"), "must be above min_um");
+    if (l.min_um < cfg.safety.sensor_min_um || l.max_um > cfg.safety.sensor_max_um)
+      throw ConfigError(sp.key("max_um"), "the setpoint range must lie inside the sensor range [safety] sensor_min_um..sensor_max_um");
+    positive("max_step_um", l.max_step_um);
+    positive("max_slope_um_per_s", l.max_slope_um_per_s);
+    l.min_V = sp.number("min_V", cfg.rig.controller.voltage_min_V);
+    l.max_V = sp.number("max_V", cfg.rig.controller.voltage_max_V);
+    if (l.min_V < cfg.rig.controller.voltage_min_V || l.max_V > cfg.rig.controller.voltage_max_V || !(l.max_V > l.min_V))
+      throw ConfigError(sp.key("max_V"), "min_V..max_V must be a range inside [controller] voltage_min_V..voltage_max_V");
+    positive("max_step_V", l.max_step_V);
+    positive("max_slope_V_per_s", l.max_slope_V_per_s);
+    positive("max_lead_s", l.max_lead_s);
+    positive("past_tolerance_s", l.past_tolerance_s);
+    l.max_chunk_samples = sp.integer("max_chunk_samples", l.max_chunk_samples);
+    if (l.max_chunk_samples < 1 || l.max_chunk_samples > 1024)
+      throw ConfigError(sp.key("max_chunk_samples"), "must be 1..1024 (the IDL's bound)");
+    positive("max_chunks_per_s", l.max_chunks_per_s);
+    positive("max_commands_per_s", l.max_commands_per_s);
+    positive("burst_s", l.burst_s);
+    sp.finish();
   });
 
   std::uint64_t h = 1469598103934665603ull;

@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// pvcgeld's configuration file: the control tables plus [loop], [hal], [safety], [run].
+/// pvcgeld's configuration file: the control tables plus [loop], [hal], [safety], [run], [dds], [setpoints].
 
 #include <limits>
 #include <string>
@@ -23,6 +23,7 @@ struct DaemonConfig {
   std::string config_hash;  ///< FNV-1a 64 of the file's bytes, hex
   bool dds_enabled = false;  ///< publish Telemetry over DDS
   dds::DdsSettings dds;      ///< `[dds]`; config path resolved relative to the config file
+  SetpointLimits setpoint_limits;  ///< `[setpoints]`: checks on setpoints and commands received over DDS
 };
 
 /// Reads and validates `path`. @throws control::ConfigError naming the key and

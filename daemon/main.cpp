@@ -13,7 +13,7 @@
 #include "control/config_error.hpp"
 #include "daemon/daemon_config.hpp"
 #include "daemon/recorder.hpp"
-#include "daemon/telemetry_publisher.hpp"
+#include "daemon/dds_bridge.hpp"
 #include "hal/sim_backend.hpp"
 
 using namespace pvcgel;
@@ -68,6 +68,8 @@ int run(const Options& opt) {
   ControlLoop loop(hal, controller, trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
   loop.set_auto_start(has_trajectory);
   loop.set_exit_on_fault(std::isfinite(cfg.duration_s));
+  auto io = std::make_unique<LoopIo>();
+  if (cfg.dds_enabled) loop.attach_io(*io, cfg.setpoint_limits);
 
   std::unique_ptr<Recorder> recorder;
   if (!opt.record.empty()) {
@@ -88,7 +90,7 @@ int run(const Options& opt) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGTERM);
   sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGUSR1);  // reset a fault (until the DDS Command topic exists)
+  sigaddset(&signals, SIGUSR1);  // reset a fault (also a DDS command)
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   RealtimeReport report = prepare_process(cfg.realtime);
@@ -100,8 +102,12 @@ int run(const Options& opt) {
     run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
     loop_done.store(true, std::memory_order_release);
   });
-  std::unique_ptr<TelemetryPublisher> publisher;
-  if (cfg.dds_enabled) publisher = std::make_unique<TelemetryPublisher>(cfg.dds);
+  std::unique_ptr<DdsBridge> bridge;
+  if (cfg.dds_enabled)
+    bridge = std::make_unique<DdsBridge>(cfg.dds, cfg.setpoint_limits, *io, *stats,
+                                         DaemonIdentity{cfg.config_hash, PVCGEL_VERSION, std::string(hal.name()),
+                                                        cfg.realtime.period_s});
+  TelemetryPublisher* publisher = bridge ? &bridge->telemetry() : nullptr;
   // The one consumer of the loop's records: recording and telemetry, off the RT thread.
   std::exception_ptr writer_error;
   std::thread writer([&] {
@@ -133,7 +139,7 @@ int run(const Options& opt) {
             << ", memory " << (report.memory_locked ? "locked" : "NOT locked") << ", backend " << hal.name()
             << ", mode " << control::to_string(cfg.rig.controller.mode)
             << (has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)"))
-            << (publisher ? ", DDS telemetry as rig '" + cfg.dds.rig_id + "' on domain " + std::to_string(cfg.dds.domain)
+            << (bridge ? ", DDS as rig '" + cfg.dds.rig_id + "' on domain " + std::to_string(cfg.dds.domain)
                           : std::string())
             << "\n";
   sd_notify(0, "READY=1");

@@ -90,7 +90,10 @@ void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatist
     const std::int64_t woke = now_ns();
     const std::int64_t latency = woke - deadline;
     stats.wakeup_latency.add(latency);
-    const CycleRecord rec = loop.cycle(static_cast<float>(latency) * 1e-3f, consecutive_overruns);
+    CycleRecord rec = loop.cycle(static_cast<float>(latency) * 1e-3f, consecutive_overruns);
+    timespec wall{};
+    clock_gettime(CLOCK_REALTIME, &wall);
+    rec.stamp_ns = static_cast<std::int64_t>(wall.tv_sec) * kNsPerS + wall.tv_nsec;
     if (!records.push(rec)) stats.records_dropped.fetch_add(1, std::memory_order_relaxed);
     latest.write(rec);
     const std::int64_t done = now_ns();

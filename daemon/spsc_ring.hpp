@@ -41,6 +41,17 @@ class SpscRing final {
     tail_.store(tail + 1, std::memory_order_release);
     return item;
   }
+  /// Consumer: the oldest item in place (no copy), or nullptr; valid until pop_front().
+  const T* front() noexcept {
+    const auto tail = tail_.load(std::memory_order_relaxed);
+    if (tail == head_cache_) {
+      head_cache_ = head_.load(std::memory_order_acquire);
+      if (tail == head_cache_) return nullptr;
+    }
+    return &slots_[tail & (Capacity - 1)];
+  }
+  /// Consumer: drop the item front() returned.
+  void pop_front() noexcept { tail_.store(tail_.load(std::memory_order_relaxed) + 1, std::memory_order_release); }
   /// Approximate number of stored items (exact when called by either side while the other is idle).
   [[nodiscard]] std::size_t size() const noexcept {
     return head_.load(std::memory_order_acquire) - tail_.load(std::memory_order_acquire);

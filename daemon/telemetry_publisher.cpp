@@ -6,24 +6,16 @@
 
 namespace pvcgel::daemon {
 
-TelemetryPublisher::TelemetryPublisher(const dds::DdsSettings& s) : rig_id_(s.rig_id) {
-  participant_ = dds::make_participant(s);
-  topic_ = dds::Entity(dds_create_topic(participant_.get(), &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic,
-                                        nullptr, nullptr),
+TelemetryPublisher::TelemetryPublisher(dds_entity_t participant, const dds::DdsSettings& s)
+    : rig_id_(s.rig_id), decimation_(s.telemetry_decimation) {
+  topic_ = dds::Entity(dds_create_topic(participant, &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr, nullptr),
                        "Telemetry topic");
-  dds_qos_t* qos = dds_create_qos();
-  if (s.reliable_telemetry) {
-    dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-    dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, 0);
-  } else {
-    dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
-    dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
-  }
-  writer_ = dds::Entity(dds_create_writer(participant_.get(), topic_.get(), qos, nullptr), "Telemetry writer");
-  dds_delete_qos(qos);
+  writer_ = dds::Entity(dds_create_writer(participant, topic_.get(), dds::telemetry_qos(s.reliable_telemetry).get(), nullptr),
+                        "Telemetry writer");
 }
 
 bool TelemetryPublisher::publish(const CycleRecord& r) noexcept {
+  if (decimation_ > 1 && r.seq % static_cast<std::uint64_t>(decimation_) != 0) return true;
   pvcgel_v1_Telemetry t{};
   std::snprintf(t.rig_id, sizeof t.rig_id, "%s", rig_id_.c_str());
   t.seq = r.seq;
@@ -38,6 +30,9 @@ bool TelemetryPublisher::publish(const CycleRecord& r) noexcept {
   t.state = static_cast<uint8_t>(r.state);
   t.fault = static_cast<uint8_t>(r.fault);
   t.high_voltage = r.high_voltage;
+  t.target = static_cast<uint8_t>(r.target);
+  t.chunk_seq = r.chunk_seq;
+  t.stamp_ns = r.stamp_ns;
   if (dds_write(writer_.get(), &t) < 0) {
     ++failures_;
     return false;

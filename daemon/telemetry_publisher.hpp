@@ -1,27 +1,30 @@
 #pragma once
 /// @file
-/// Publishes loop records as pvcgel::v1::Telemetry (off the real-time thread).
+/// Publishes loop records as DDS Telemetry, off the real-time thread.
+
+#include <cstdint>
+#include <string>
 
 #include "daemon/control_loop.hpp"
 #include "daemon/dds/dds_participant.hpp"
 
 namespace pvcgel::daemon {
 
-/// One DDS writer for the Telemetry topic, keyed by rig id. QoS: best-effort
-/// keep-last(1) by default (live views never slow anything down); reliable
-/// keep-all when `reliable_telemetry` is set, so `pvcgel record` is lossless.
+/// Writer of the Telemetry topic for one rig.
 class TelemetryPublisher final {
  public:
-  /// @throws std::runtime_error when DDS cannot be joined.
-  explicit TelemetryPublisher(const dds::DdsSettings& settings);
-  /// Publish one record; returns false when DDS refused it (counted).
+  /// @param participant  an existing participant (owned by the caller, outlives this)
+  /// @throws std::runtime_error when the writer cannot be created.
+  TelemetryPublisher(dds_entity_t participant, const dds::DdsSettings& settings);
+  /// Publish one record (every `telemetry_decimation`-th); false when DDS refused it (counted).
   bool publish(const CycleRecord& r) noexcept;
   /// Samples DDS refused.
   [[nodiscard]] std::uint64_t failures() const noexcept { return failures_; }
 
  private:
-  dds::Entity participant_, topic_, writer_;
+  dds::Entity topic_, writer_;
   std::string rig_id_;
+  int decimation_ = 1;
   std::uint64_t failures_ = 0;
 };
 

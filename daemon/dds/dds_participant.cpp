@@ -37,4 +37,54 @@ Entity make_participant(const DdsSettings& s) {
   return Entity(dds_create_participant(static_cast<dds_domainid_t>(s.domain), nullptr, nullptr), "participant");
 }
 
+namespace {
+Qos reliable_qos() {
+  Qos q(dds_create_qos());
+  dds_qset_reliability(q.get(), DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  return q;
+}
+}  // namespace
+
+Qos telemetry_qos(bool reliable) {
+  Qos q(dds_create_qos());
+  if (reliable) {
+    dds_qset_reliability(q.get(), DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+    dds_qset_history(q.get(), DDS_HISTORY_KEEP_ALL, 0);
+  } else {
+    dds_qset_reliability(q.get(), DDS_RELIABILITY_BEST_EFFORT, 0);
+    dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 1);
+  }
+  return q;
+}
+
+Qos trajectory_qos(bool reader) {
+  // Reliable so chunks are not lost; the daemon's reader keeps at most 64 per
+  // rig, which bounds what a client can make it hold.
+  Qos q = reliable_qos();
+  if (reader) dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 64);
+  else dds_qset_history(q.get(), DDS_HISTORY_KEEP_ALL, 0);
+  return q;
+}
+
+Qos command_qos(bool reader) {
+  Qos q = reliable_qos();
+  if (reader) dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 16);
+  else dds_qset_history(q.get(), DDS_HISTORY_KEEP_ALL, 0);
+  return q;
+}
+
+Qos reply_qos() {
+  Qos q = reliable_qos();
+  dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 64);
+  return q;
+}
+
+Qos status_qos() {
+  // Transient-local keep-last(1): a client that joins late gets the latest status at once.
+  Qos q = reliable_qos();
+  dds_qset_durability(q.get(), DDS_DURABILITY_TRANSIENT_LOCAL);
+  dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 1);
+  return q;
+}
+
 }  // namespace pvcgel::dds

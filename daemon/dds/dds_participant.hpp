@@ -4,6 +4,7 @@
 
 #include <dds/dds.h>
 
+#include <memory>
 #include <string>
 
 namespace pvcgel::dds {
@@ -33,10 +34,31 @@ struct DdsSettings {
   std::string config_path;
   std::string rig_id = "rig1";
   bool reliable_telemetry = false;
+  /// Publish every n-th cycle (1: every cycle).
+  int telemetry_decimation = 1;
 };
 
-/// Name of the Telemetry topic.
+/// Topic names (the IDL documents each).
 inline constexpr const char* kTelemetryTopic = "pvcgel_v1_Telemetry";
+inline constexpr const char* kTrajectoryTopic = "pvcgel_v1_Trajectory";
+inline constexpr const char* kCommandTopic = "pvcgel_v1_Command";
+inline constexpr const char* kCommandReplyTopic = "pvcgel_v1_CommandReply";
+inline constexpr const char* kStatusTopic = "pvcgel_v1_Status";
+
+/// Owned dds_qos_t.
+struct QosDeleter {
+  void operator()(dds_qos_t* q) const noexcept { dds_delete_qos(q); }
+};
+using Qos = std::unique_ptr<dds_qos_t, QosDeleter>;
+
+/// QoS of each topic, the same for the daemon and every client (see the IDL).
+/// Readers and writers take the same profile; `reader` selects the reader side
+/// where the two differ (bounded keep-last readers on the daemon's inputs).
+Qos telemetry_qos(bool reliable);
+Qos trajectory_qos(bool reader);
+Qos command_qos(bool reader);
+Qos reply_qos();
+Qos status_qos();
 
 /// Creates a participant on `s.domain` configured by `s.config_path` (set as
 /// CYCLONEDDS_URI for this process). @throws std::runtime_error.
