@@ -168,7 +168,7 @@ class Client final {
 
   /// Takes whatever arrived, waiting up to `max_wait_s` for something new.
   void pump(double max_wait_s) {
-    telemetry_->wait_for_unread_message(fdds::Duration_t(max_wait_s));
+    telemetry_->wait_for_unread_message(eprosima::fastrtps::Duration_t(max_wait_s));
     v1::Telemetry t;
     fdds::SampleInfo info;
     while (telemetry_->take_next_sample(&t, &info) == ReturnCode_t::RETCODE_OK) {
@@ -271,8 +271,8 @@ class Client final {
 
   /// Makes sure reliable samples reached every matched reader before we go.
   void flush() {
-    command_->wait_for_acknowledgments(fdds::Duration_t(2.0));
-    trajectory_->wait_for_acknowledgments(fdds::Duration_t(2.0));
+    command_->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2.0));
+    trajectory_->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2.0));
   }
 
   static int64_t realtime_ns() {

@@ -180,6 +180,77 @@ TEST(FastDdsInterop, ReceivesDaemonTelemetryGaplessAndStaysOnLoopback) {
   EXPECT_GT(r_max - r_min, 10.0) << "a moving reference";
 }
 
+// The Fast DDS client arms and starts the idle daemon, holds 60 um, plays a
+// sine from there and stops; every step is answered and executed.
+TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
+  const std::string csv_path = temp_path("drive.csv");
+  ChildProcess daemon(kDaemon, {"--config", daemon_config("interop_rig_c", ""), "--duration", "60"}, temp_path("daemon_c"));
+  ChildProcess client(kClient,
+                      {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_c", "--wait",
+                       "10", "drive", "--out", csv_path, "--level", "60", "--blend", "1", "--hold", "3", "--amplitude",
+                       "20", "--freq", "0.5", "--sine", "4"},
+                      temp_path("client_c"));
+  ASSERT_EQ(client.wait(45.0), 0) << client.output() << "\ndaemon:\n" << daemon.err();
+  EXPECT_EQ(daemon.terminate_and_wait(), 0) << daemon.output();
+
+  // Every command and chunk answered "accepted" by the daemon over CommandReply.
+  const std::string out = client.out();
+  for (const char* reply : {"seq=1 is_trajectory=0 accepted=1", "seq=2 is_trajectory=0 accepted=1",
+                            "seq=1 is_trajectory=1 accepted=1", "seq=2 is_trajectory=1 accepted=1",
+                            "seq=3 is_trajectory=0 accepted=1"})
+    EXPECT_NE(out.find("reply rig_id=interop_rig_c client_id=fastdds-interop " + std::string(reply)), std::string::npos)
+        << reply << "\n" << out;
+
+  const Csv t = read_csv(csv_path);
+  ASSERT_GT(t.rows, 6000u) << "3 s hold + 4 s sine at 1 kHz";
+  expect_gapless(t, 0.001);
+  expect_consistent_fields(t);
+  const auto& time = t.col("t_s");
+  const auto& r = t.col("r_um");
+  const auto& e = t.col("e_um");
+  const auto& chunk = t.col("chunk_seq");
+  const auto& state = t.col("state");
+  // Telemetry names the chunk in force: 0 before ours, then 1 (hold), then 2 (sine), never back.
+  size_t first_hold = t.rows, first_sine = t.rows, last_hold = 0, last_sine = 0;
+  for (size_t k = 0; k < t.rows; ++k) {
+    if (k > 0) {
+      ASSERT_GE(chunk[k], chunk[k - 1]) << "row " << k;
+    }
+    if (state[k] != 2.0) continue;  // RUNNING only: the ramp-down after stop is not the trajectory
+    if (chunk[k] == 1.0) first_hold = std::min(first_hold, k), last_hold = k;
+    if (chunk[k] == 2.0) first_sine = std::min(first_sine, k), last_sine = k;
+  }
+  ASSERT_LT(first_hold, t.rows) << "no telemetry row carries chunk_seq 1";
+  ASSERT_LT(first_sine, t.rows) << "no telemetry row carries chunk_seq 2";
+  ASSERT_EQ(last_hold + 1, first_sine);
+
+  // Hold: after the blend (the daemon's soft start may stretch it) r is the level, y on it.
+  double hold_r_dev = 0.0, hold_e = 0.0;
+  for (size_t k = first_hold; k <= last_hold; ++k)
+    if (time[k] > time[last_hold] - 0.8) {
+      hold_r_dev = std::max(hold_r_dev, std::abs(r[k] - 60.0));
+      hold_e = std::max(hold_e, std::abs(e[k]));
+    }
+  // Sine: r is the segment the client described, from the cycle that started it.
+  const double t0 = time[first_sine];
+  double sine_r_dev = 0.0, sine_e = 0.0, r_min = 1e9, r_max = -1e9;
+  for (size_t k = first_sine; k <= last_sine; ++k) {
+    sine_r_dev = std::max(sine_r_dev, std::abs(r[k] - (60.0 + 20.0 * std::sin(2.0 * M_PI * 0.5 * (time[k] - t0)))));
+    r_min = std::min(r_min, r[k]);
+    r_max = std::max(r_max, r[k]);
+    if (time[k] > t0 + 0.5) sine_e = std::max(sine_e, std::abs(e[k]));
+  }
+  std::cout << "[interop] " << t.rows << " samples; hold (last 0.8 s): max |r - 60| " << hold_r_dev << " um, max |e| "
+            << hold_e << " um; sine (" << (last_sine - first_sine + 1) << " cycles): max |r - formula| " << sine_r_dev
+            << " um, r in [" << r_min << ", " << r_max << "], max |e| after 0.5 s " << sine_e << " um\n";
+  EXPECT_LT(hold_r_dev, 1e-9);
+  EXPECT_LT(hold_e, 1.0);
+  EXPECT_LT(sine_r_dev, 1e-6);
+  EXPECT_NEAR(r_min, 40.0, 0.01);
+  EXPECT_NEAR(r_max, 80.0, 0.01);
+  EXPECT_LT(sine_e, 2.0) << "the daemon e2e test's bound for a 0.5 Hz reference";
+}
+
 // --- this process as a Cyclone DDS peer -------------------------------------
 
 using pvcgel::dds::Entity;
