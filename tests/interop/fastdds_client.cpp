@@ -4,8 +4,8 @@
 // daemon's Cyclone types come from; nothing here knows about Cyclone.
 //
 //   listen  record the daemon's telemetry for a while (CSV)
-//   drive   arm, start, hold a level, play a sine, stop; telemetry to CSV,
-//           every CommandReply on stdout
+//   drive   arm and start (unless RUNNING), hold a level, play a sine, stop; telemetry to CSV,
+//           every CommandReply and the last Status on stdout
 //   echo    publish one Command and one Trajectory whose fields derive from
 //           --seq, print every field of the Status and CommandReply received
 //           (the test's Cyclone peer checks both directions field by field)
@@ -59,6 +59,7 @@ struct Options {
   std::string out_path;
   // listen
   double duration_s = 3.0;
+  bool best_effort = false;
   // drive
   double level_um = 60.0;
   double blend_s = 1.0;
@@ -100,9 +101,9 @@ fdds::DataWriterQos writer_qos() {
   return q;
 }
 
-fdds::DataReaderQos reader_qos(bool transient_local, bool keep_all, int depth) {
+fdds::DataReaderQos reader_qos(bool transient_local, bool keep_all, int depth, bool reliable = true) {
   fdds::DataReaderQos q = fdds::DATAREADER_QOS_DEFAULT;
-  q.reliability().kind = fdds::RELIABLE_RELIABILITY_QOS;
+  q.reliability().kind = reliable ? fdds::RELIABLE_RELIABILITY_QOS : fdds::BEST_EFFORT_RELIABILITY_QOS;
   q.durability().kind = transient_local ? fdds::TRANSIENT_LOCAL_DURABILITY_QOS : fdds::VOLATILE_DURABILITY_QOS;
   q.history().kind = keep_all ? fdds::KEEP_ALL_HISTORY_QOS : fdds::KEEP_LAST_HISTORY_QOS;
   q.history().depth = depth;
@@ -142,9 +143,11 @@ class Client final {
     auto* sub = participant_->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
     auto* pub = participant_->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
     if (sub == nullptr || pub == nullptr) fail("cannot create publisher/subscriber");
-    // Reliable keep-all matches the daemon's reliable_telemetry writer; a
-    // best-effort daemon writer would not match (requested > offered).
-    telemetry_ = sub->create_datareader(telemetry, reader_qos(false, true, 1));
+    // Reliable keep-all for the daemon's reliable_telemetry writer; its
+    // default best-effort writer matches only a best-effort reader (requested
+    // > offered), which keeps the last 100 here so a slow take loses nothing.
+    telemetry_ = o.best_effort ? sub->create_datareader(telemetry, reader_qos(false, false, 100, false))
+                               : sub->create_datareader(telemetry, reader_qos(false, true, 1));
     reply_ = sub->create_datareader(reply, reader_qos(false, false, 64));
     status_ = sub->create_datareader(status, reader_qos(true, false, 1));
     trajectory_ = pub->create_datawriter(trajectory, writer_qos());
@@ -216,7 +219,9 @@ class Client final {
   void wait_for_daemon(bool need_command_path) {
     if (!pump_until([&] { return telemetry_samples_ > 0; }, o_.wait_s))
       fail("no telemetry from rig '" + o_.rig_id + "' within " + exact(o_.wait_s) + " s" +
-           (other_rig_samples_ > 0 ? " (other rigs are publishing)" : ""));
+           (other_rig_samples_ > 0 ? " (other rigs are publishing)"
+            : o_.best_effort       ? ""
+                                   : " (a reliable reader needs the daemon's dds.reliable_telemetry = true; else --best-effort)"));
     if (need_command_path) wait_for_matches(o_.wait_s, "the daemon");
   }
 
@@ -380,6 +385,8 @@ int run_drive(const Options& o) {
   TelemetryCsv csv(o.out_path);
   c.on_telemetry = [&](const v1::Telemetry& t) { csv.write(t); };
   c.on_reply = print_reply;
+  std::optional<v1::Status> last_status;
+  c.on_status = [&](const v1::Status& s) { last_status = s; };
   c.wait_for_daemon(true);
 
   uint64_t seq = 0;
@@ -387,8 +394,12 @@ int run_drive(const Options& o) {
     c.send(command(++seq, kind));
     c.await_reply(seq, false, what);
   };
-  execute(kArm, "arm");
-  execute(kStart, "start");
+  if (c.last_telemetry().state() == kStateRunning) {
+    std::cout << "rig already RUNNING: arm and start skipped" << std::endl;
+  } else {
+    execute(kArm, "arm");
+    execute(kStart, "start");
+  }
   if (!c.pump_until([&] { return c.last_telemetry().state() == kStateRunning; }, 5.0))
     fail("rig not RUNNING 5 s after an accepted start");
 
@@ -408,7 +419,8 @@ int run_drive(const Options& o) {
   c.pump_for(o.sine_s);
 
   execute(kStop, "stop");
-  c.pump_for(0.2);
+  c.pump_for(0.3);
+  if (last_status) print_status(*last_status);
   std::cout << "telemetry samples " << c.telemetry_samples() << ", status samples " << c.status_samples()
             << std::endl;
   return 0;
@@ -463,6 +475,7 @@ int main(int argc, char** argv) {
   auto* listen = app.add_subcommand("listen", "record telemetry");
   listen->add_option("--out", o.out_path, "telemetry CSV")->required();
   listen->add_option("--duration", o.duration_s, "seconds after the first sample");
+  listen->add_flag("--best-effort", o.best_effort, "best-effort reader (the daemon's default telemetry QoS)");
   auto* drive = app.add_subcommand("drive", "arm, start, hold, sine, stop");
   drive->add_option("--out", o.out_path, "telemetry CSV")->required();
   drive->add_option("--level", o.level_um, "hold level and sine offset (um)");
