@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <limits>
 #include <new>
@@ -40,4 +41,44 @@ TEST(LoopNoAllocation, CyclesOfEveryModeAndFaultPathAllocateNothing) {
   }
   EXPECT_EQ(g_allocations.load() - before, 0);
   EXPECT_EQ(loop.fault(), daemon::FaultReason::sensor_nan);
+}
+
+TEST(LoopNoAllocation, CommandsAndReceivedSetpointsAllocateNothingInTheLoop) {
+  control::Controller controller(control::paper_model(2), control::ControllerConfig{});
+  hal::SimBackend sim(control::SimRigConfig{});
+  const auto idle = daemon::Trajectory::parse("hold:0");
+  auto io = std::make_unique<daemon::LoopIo>();
+  daemon::ControlLoop loop(sim, controller, idle, daemon::SafetyConfig{}, 1e-3, std::numeric_limits<double>::infinity());
+  loop.set_auto_start(false);
+  loop.attach_io(*io, daemon::SetpointLimits{});
+  daemon::LoopInput cmd;
+  daemon::LoopInput seg;
+  seg.type = daemon::LoopInput::Type::segment;
+  seg.segment.kind = daemon::SetpointSegment::Kind::samples;
+  seg.segment.timing = daemon::SetpointSegment::Timing::append;
+  seg.segment.period_s = 1e-3;
+  seg.segment.count = daemon::SetpointSegment::kMaxValues;
+  seg.segment.end_s = seg.segment.count * 1e-3;
+
+  const long before = g_allocations.load();
+  std::uint32_t ticket = 0;
+  for (int k = 0; k < 8000; ++k) {
+    cmd.ticket = ++ticket;
+    if (k == 10) cmd.command = daemon::CommandKind::arm, io->inputs.push(cmd);
+    if (k == 20) cmd.command = daemon::CommandKind::start, io->inputs.push(cmd);
+    if (k >= 100 && k % 100 == 0) {
+      for (int i = 0; i < seg.segment.count; ++i)
+        seg.segment.values[static_cast<size_t>(i)] = 20.0 + 5.0 * std::sin(2e-3 * (k + i));
+      seg.ticket = ++ticket;
+      io->inputs.push(seg);
+    }
+    if (k % 1000 == 500) cmd.command = daemon::CommandKind::set_mode, cmd.argument = static_cast<std::uint8_t>(k / 1000 % 4),
+                         io->inputs.push(cmd);
+    if (k == 7000) cmd.command = daemon::CommandKind::stop, io->inputs.push(cmd);
+    (void)loop.cycle(1.0f, 0);
+    while (io->outcomes.pop()) {
+    }
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(loop.state(), daemon::LoopState::disabled);
 }

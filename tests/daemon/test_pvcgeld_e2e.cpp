@@ -1,10 +1,5 @@
 // End to end: the real pvcgeld binary, sim backend, as a subprocess.
-#include <fcntl.h>
 #include <gtest/gtest.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <fstream>
@@ -12,9 +7,8 @@
 #include <sstream>
 #include <thread>
 
+#include "support/subprocess.hpp"
 #include "tools/recording.hpp"
-
-extern char** environ;
 
 namespace {
 
@@ -23,49 +17,9 @@ const std::string kClient = PVCGEL_PATH;
 const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclonedds-loopback.xml";
 const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
 
-struct Result {
-  int exit_code = -1;
-  int signal = 0;
-  std::string err;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-/// Runs pvcgeld; if sigterm_after_s > 0, sends SIGTERM then. Waits for exit.
-Result run_program(const std::string& program, std::vector<std::string> args, double sigterm_after_s = 0.0) {
-  static int counter = 0;
-  const std::string err_path = ::testing::TempDir() + "pvcgeld_stderr_" + std::to_string(getpid()) + "_" +
-                               std::to_string(counter++) + ".txt";
-  args.insert(args.begin(), program);
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  pid_t pid = 0;
-  EXPECT_EQ(posix_spawn(&pid, program.c_str(), &fa, nullptr, argv.data(), environ), 0);
-  posix_spawn_file_actions_destroy(&fa);
-  if (sigterm_after_s > 0.0) {
-    std::this_thread::sleep_for(std::chrono::duration<double>(sigterm_after_s));
-    kill(pid, SIGTERM);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  Result r;
-  if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
-  if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
-  r.err = slurp(err_path);
-  // Say which scheduling the daemon got: the tests must pass either way.
-  const auto pos = r.err.find("loop running");
-  if (pos != std::string::npos) std::cout << "[mode] " << r.err.substr(pos, r.err.find('\n', pos) - pos) << "\n";
-  return r;
-}
+using pvcgel::test::Result;
+using pvcgel::test::run_program;
+using pvcgel::test::slurp;
 
 Result run_daemon(std::vector<std::string> args, double sigterm_after_s = 0.0) {
   return run_program(kDaemon, std::move(args), sigterm_after_s);

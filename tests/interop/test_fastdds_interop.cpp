@@ -16,12 +16,12 @@
 #include <thread>
 
 #include "daemon/dds/dds_participant.hpp"
-#include "tests/support/child_process.hpp"
+#include "tests/support/subprocess.hpp"
 #include "pvcgel_v1.h"
 
 namespace {
 
-using pvcgel::test::ChildProcess;
+using pvcgel::test::Process;
 constexpr int kDomain = 7;
 const std::string kDaemon = PVCGELD_PATH;
 const std::string kClient = FASTDDS_CLIENT_PATH;
@@ -145,11 +145,10 @@ std::vector<std::string> joined_multicast_groups() {
 
 TEST(FastDdsInterop, ReceivesDaemonTelemetryGaplessAndStaysOnLoopback) {
   const std::string csv_path = temp_path("listen.csv");
-  ChildProcess daemon(kDaemon, {"--config", daemon_config("interop_rig_a", "paper-0.5hz"), "--duration", "12"}, temp_path("daemon_a"));
-  ChildProcess client(kClient,
+  Process daemon(kDaemon, {"--config", daemon_config("interop_rig_a", "paper-0.5hz"), "--duration", "12"});
+  Process client(kClient,
                {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_a", "--wait", "10",
-                "listen", "--out", csv_path, "--duration", "5"},
-               temp_path("client_a"));
+                "listen", "--out", csv_path, "--duration", "5"});
   // While both run: nothing bound outside loopback, no multicast group joined.
   std::this_thread::sleep_for(std::chrono::seconds(3));
   for (const pid_t pid : {daemon.pid(), client.pid()}) {
@@ -158,8 +157,10 @@ TEST(FastDdsInterop, ReceivesDaemonTelemetryGaplessAndStaysOnLoopback) {
   }
   EXPECT_EQ(joined_multicast_groups(), std::vector<std::string>{}) << "see /proc/net/igmp";
 
-  ASSERT_EQ(client.wait(30.0), 0) << client.output();
-  EXPECT_EQ(daemon.terminate_and_wait(), 0) << daemon.output();
+  const auto client_result = client.wait();
+  ASSERT_EQ(client_result.exit_code, 0) << client_result.err;
+  const auto daemon_result = daemon.stop();
+  EXPECT_EQ(daemon_result.exit_code, 0) << daemon_result.err;
   const Csv t = read_csv(csv_path);
   std::cout << "[interop] Fast DDS received " << t.rows << " telemetry samples from pvcgeld\n";
   ASSERT_GE(t.rows, 4500u) << "5 s at 1 kHz";
@@ -192,14 +193,14 @@ TEST(FastDdsInterop, ReceivesDaemonTelemetryGaplessAndStaysOnLoopback) {
 // loopback nearly every cycle arrives, in order.
 TEST(FastDdsInterop, ReceivesBestEffortTelemetry) {
   const std::string csv_path = temp_path("listen_be.csv");
-  ChildProcess daemon(kDaemon, {"--config", daemon_config("interop_rig_d", "paper-0.5hz", false), "--duration", "30"},
-                      temp_path("daemon_d"));
-  ChildProcess client(kClient,
+  Process daemon(kDaemon, {"--config", daemon_config("interop_rig_d", "paper-0.5hz", false), "--duration", "30"});
+  Process client(kClient,
                       {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_d", "--wait",
-                       "10", "listen", "--best-effort", "--out", csv_path, "--duration", "3"},
-                      temp_path("client_d"));
-  ASSERT_EQ(client.wait(30.0), 0) << client.output();
-  EXPECT_EQ(daemon.terminate_and_wait(), 0) << daemon.output();
+                       "10", "listen", "--best-effort", "--out", csv_path, "--duration", "3"});
+  const auto client_result = client.wait();
+  ASSERT_EQ(client_result.exit_code, 0) << client_result.err;
+  const auto daemon_result = daemon.stop();
+  EXPECT_EQ(daemon_result.exit_code, 0) << daemon_result.err;
   const Csv t = read_csv(csv_path);
   ASSERT_GT(t.rows, 0u);
   const auto& seq = t.col("seq");
@@ -216,17 +217,18 @@ TEST(FastDdsInterop, ReceivesBestEffortTelemetry) {
 // daemon's Status counts it.
 TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
   const std::string csv_path = temp_path("drive.csv");
-  ChildProcess daemon(kDaemon, {"--config", daemon_config("interop_rig_c", ""), "--duration", "60"}, temp_path("daemon_c"));
-  ChildProcess client(kClient,
+  Process daemon(kDaemon, {"--config", daemon_config("interop_rig_c", ""), "--duration", "60"});
+  Process client(kClient,
                       {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_c", "--wait",
                        "10", "drive", "--out", csv_path, "--level", "60", "--blend", "1", "--hold", "3", "--amplitude",
-                       "20", "--freq", "0.5", "--sine", "4"},
-                      temp_path("client_c"));
-  ASSERT_EQ(client.wait(45.0), 0) << client.output() << "\ndaemon:\n" << daemon.err();
-  EXPECT_EQ(daemon.terminate_and_wait(), 0) << daemon.output();
+                       "20", "--freq", "0.5", "--sine", "4"});
+  const auto client_result = client.wait();
+  ASSERT_EQ(client_result.exit_code, 0) << client_result.out << client_result.err << "\ndaemon:\n" << daemon.err_so_far();
+  const auto daemon_result = daemon.stop();
+  EXPECT_EQ(daemon_result.exit_code, 0) << daemon_result.err;
 
   // Every command and chunk answered "accepted" by the daemon over CommandReply.
-  const std::string out = client.out();
+  const std::string& out = client_result.out;
   for (const char* reply : {"seq=1 is_trajectory=0 accepted=1", "seq=2 is_trajectory=0 accepted=1",
                             "seq=1 is_trajectory=1 accepted=1", "seq=2 is_trajectory=1 accepted=1",
                             "seq=3 is_trajectory=0 accepted=1"})
@@ -380,15 +382,14 @@ TEST(FastDdsInterop, EveryTopicDecodesFieldByFieldBetweenCycloneAndFastDds) {
   const std::vector<double> values = {1.5, -2.25, 1e-300, 123456.789, -0.0, 7.0};
   std::string values_arg;
   for (double v : values) values_arg += (values_arg.empty() ? "" : ",") + exact(v);
-  ChildProcess client(kClient,
+  Process client(kClient,
                {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_b", "--client-id",
-                "fastdds-echo", "--wait", "15", "echo", "--seq", std::to_string(seq), "--values", values_arg},
-               temp_path("client_b"));
+                "fastdds-echo", "--wait", "15", "echo", "--seq", std::to_string(seq), "--values", values_arg});
 
   // Fast DDS -> Cyclone: the Command and the Trajectory, every field.
   pvcgel_v1_Command command{};
   ASSERT_TRUE(take_one<pvcgel_v1_Command>(command_reader, 20.0, [&](const auto& c) { command = c; }))
-      << client.output();
+      << client.err_so_far();
   EXPECT_STREQ(command.rig_id, "interop_rig_b");
   EXPECT_STREQ(command.client_id, "fastdds-echo");
   EXPECT_EQ(command.command_seq, seq + 1);
@@ -410,7 +411,7 @@ TEST(FastDdsInterop, EveryTopicDecodesFieldByFieldBetweenCycloneAndFastDds) {
     EXPECT_EQ(t.blend_s, 0.125);
     ASSERT_EQ(t.values._length, values.size());
     for (size_t i = 0; i < values.size(); ++i) EXPECT_EQ(std::memcmp(&t.values._buffer[i], &values[i], 8), 0) << i;
-  })) << client.output();
+  })) << client.err_so_far();
   EXPECT_TRUE(got_trajectory);
 
   // Cyclone -> Fast DDS: a CommandReply once the client's reader is there (volatile).
@@ -419,7 +420,7 @@ TEST(FastDdsInterop, EveryTopicDecodesFieldByFieldBetweenCycloneAndFastDds) {
     dds_get_publication_matched_status(reply_writer.get(), &matched);
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  ASSERT_GT(matched.current_count, 0u) << client.output();
+  ASSERT_GT(matched.current_count, 0u) << client.err_so_far();
   pvcgel_v1_CommandReply reply{};
   std::snprintf(reply.rig_id, sizeof reply.rig_id, "interop_rig_b");
   std::snprintf(reply.client_id, sizeof reply.client_id, "fastdds-echo");
@@ -430,8 +431,9 @@ TEST(FastDdsInterop, EveryTopicDecodesFieldByFieldBetweenCycloneAndFastDds) {
   std::snprintf(reply.detail, sizeof reply.detail, "values[2] = 1e-300: some reason with spaces");
   ASSERT_EQ(dds_write(reply_writer.get(), &reply), 0);
 
-  ASSERT_EQ(client.wait(30.0), 0) << client.output();
-  const std::string out = client.out();
+  const auto client_result = client.wait();
+  ASSERT_EQ(client_result.exit_code, 0) << client_result.err;
+  const std::string& out = client_result.out;
   EXPECT_NE(out.find("reply rig_id=interop_rig_b client_id=fastdds-echo seq=41 is_trajectory=1 accepted=0 reason=5 "
                      "detail=values[2] = 1e-300: some reason with spaces\n"),
             std::string::npos)

@@ -1,0 +1,251 @@
+#include "tools/dds_client.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <thread>
+
+namespace pvcgel::tools {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+template <std::size_t N>
+void copy_string(char (&dst)[N], const std::string& src) {
+  std::snprintf(dst, N, "%s", src.c_str());
+}
+
+bool same_guid(const dds_guid_t& a, const dds_guid_t& b) { return std::memcmp(a.v, b.v, sizeof a.v) == 0; }
+
+}  // namespace
+
+void add_client_options(CLI::App& cmd, ClientOptions& o) {
+  if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
+  cmd.add_option("--rig", o.rig, "rig id (the daemon's [dds] rig_id)")->capture_default_str();
+  cmd.add_option("--domain", o.domain, "DDS domain")->capture_default_str();
+  cmd.add_option("--dds-config", o.dds_config,
+                 "Cyclone DDS XML configuration (default $PVCGEL_DDS_CONFIG; config/cyclonedds-loopback.xml on one PC)")
+      ->capture_default_str();
+  cmd.add_option("--wait", o.wait_s, "seconds to look for the daemon and to wait for each reply")->capture_default_str();
+}
+
+DdsClient::DdsClient(const ClientOptions& o, bool telemetry, bool reliable_telemetry) : opt_(o) {
+  if (opt_.dds_config.empty())
+    throw std::runtime_error("no DDS configuration: pass --dds-config FILE or set PVCGEL_DDS_CONFIG (on one PC: "
+                             "config/cyclonedds-loopback.xml)");
+  char host[64] = "host";
+  gethostname(host, sizeof host - 1);
+  client_id_ = std::string("pvcgel@") + host;
+  client_id_ = client_id_.substr(0, 24) + ":" + std::to_string(getpid());
+  // Sequence numbers start from the clock so a restarted client never reuses a recent one.
+  next_seq_ = static_cast<std::uint64_t>(realtime_ns() / 1000);
+
+  dds::DdsSettings s;
+  s.domain = opt_.domain;
+  s.config_path = opt_.dds_config;
+  s.rig_id = opt_.rig;
+  participant_ = dds::make_participant(s);
+  const dds_entity_t p = participant_.get();
+  trajectory_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Trajectory_desc, dds::kTrajectoryTopic, nullptr, nullptr),
+                                  "Trajectory topic");
+  command_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Command_desc, dds::kCommandTopic, nullptr, nullptr),
+                               "Command topic");
+  reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
+                             "CommandReply topic");
+  status_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Status_desc, dds::kStatusTopic, nullptr, nullptr),
+                              "Status topic");
+  trajectory_writer_ = dds::Entity(dds_create_writer(p, trajectory_topic_.get(), dds::trajectory_qos(false).get(), nullptr),
+                                   "Trajectory writer");
+  command_writer_ = dds::Entity(dds_create_writer(p, command_topic_.get(), dds::command_qos(false).get(), nullptr),
+                                "Command writer");
+  reply_reader_ = dds::Entity(dds_create_reader(p, reply_topic_.get(), dds::reply_qos().get(), nullptr), "CommandReply reader");
+  status_reader_ = dds::Entity(dds_create_reader(p, status_topic_.get(), dds::status_qos().get(), nullptr), "Status reader");
+  if (telemetry) {
+    telemetry_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr, nullptr),
+                                   "Telemetry topic");
+    telemetry_reader_ = dds::Entity(
+        dds_create_reader(p, telemetry_topic_.get(), dds::telemetry_qos(reliable_telemetry).get(), nullptr),
+        "Telemetry reader");
+  }
+}
+
+void DdsClient::poll_status() {
+  void* samples[8] = {};
+  dds_sample_info_t infos[8];
+  for (;;) {
+    const int n = dds_take(status_reader_.get(), samples, infos, 8, 8);
+    if (n <= 0) return;
+    for (int i = 0; i < n; ++i) {
+      if (!infos[i].valid_data) continue;
+      const auto* s = static_cast<const pvcgel_v1_Status*>(samples[i]);
+      if (opt_.rig != s->rig_id) {
+        if (std::find(other_rigs_.begin(), other_rigs_.end(), s->rig_id) == other_rigs_.end())
+          other_rigs_.emplace_back(s->rig_id);
+        continue;
+      }
+      if (!status_) {
+        if (auto* ep = dds_get_matched_publication_data(status_reader_.get(), infos[i].publication_handle)) {
+          daemon_participant_ = ep->participant_key;
+          dds_builtintopic_free_endpoint(ep);
+        }
+      }
+      status_ = *s;
+    }
+    dds_return_loan(status_reader_.get(), samples, n);
+  }
+}
+
+bool DdsClient::matched_daemon(dds_entity_t endpoint, bool is_writer) {
+  dds_instance_handle_t handles[64];
+  const int n = is_writer ? dds_get_matched_subscriptions(endpoint, handles, 64)
+                          : dds_get_matched_publications(endpoint, handles, 64);
+  for (int i = 0; i < std::min(n, 64); ++i) {
+    auto* ep = is_writer ? dds_get_matched_subscription_data(endpoint, handles[i])
+                         : dds_get_matched_publication_data(endpoint, handles[i]);
+    if (!ep) continue;
+    const bool same = same_guid(ep->participant_key, daemon_participant_);
+    dds_builtintopic_free_endpoint(ep);
+    if (same) return true;
+  }
+  return false;
+}
+
+const pvcgel_v1_Status& DdsClient::connect() {
+  const auto deadline = Clock::now() + std::chrono::duration<double>(opt_.wait_s);
+  while (!status_) {
+    poll_status();
+    if (status_) break;
+    if (Clock::now() > deadline) {
+      std::string seen;
+      for (const auto& r : other_rigs_) seen += (seen.empty() ? "" : ", ") + r;
+      throw std::runtime_error(other_rigs_.empty()
+                                   ? "no daemon found within " + std::to_string(opt_.wait_s) + " s on domain " +
+                                         std::to_string(opt_.domain) +
+                                         " (is pvcgeld running with [dds] enabled, on the same DDS configuration?)"
+                                   : "rig '" + opt_.rig + "' unknown; rigs seen: " + seen);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  // Reliable volatile topics: a sample written before the daemon's reader has
+  // matched ours would be lost, so wait for every match with this daemon.
+  while (!(matched_daemon(command_writer_.get(), true) && matched_daemon(trajectory_writer_.get(), true) &&
+           matched_daemon(reply_reader_.get(), false) &&
+           (telemetry_reader_.get() == 0 || matched_daemon(telemetry_reader_.get(), false)))) {
+    if (Clock::now() > deadline)
+      throw std::runtime_error("found rig '" + opt_.rig + "' but its command endpoints did not match within " +
+                               std::to_string(opt_.wait_s) + " s (QoS or version mismatch?)");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return *status_;
+}
+
+const pvcgel_v1_Status& DdsClient::status() {
+  poll_status();
+  if (!status_) return connect();
+  return *status_;
+}
+
+std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t argument) {
+  pvcgel_v1_Command c{};
+  copy_string(c.rig_id, opt_.rig);
+  copy_string(c.client_id, client_id_);
+  c.command_seq = ++next_seq_;
+  c.kind = static_cast<uint8_t>(kind);
+  c.argument = argument;
+  if (const auto rc = dds_write(command_writer_.get(), &c); rc < 0)
+    throw std::runtime_error(std::string("DDS write of a command failed: ") + dds_strretcode(rc));
+  return c.command_seq;
+}
+
+std::uint64_t DdsClient::publish_trajectory(pvcgel_v1_Trajectory& t) {
+  copy_string(t.rig_id, opt_.rig);
+  copy_string(t.client_id, client_id_);
+  t.chunk_seq = ++next_seq_;
+  t.publish_time_ns = realtime_ns();
+  if (const auto rc = dds_write(trajectory_writer_.get(), &t); rc < 0)
+    throw std::runtime_error(std::string("DDS write of a trajectory failed: ") + dds_strretcode(rc));
+  return t.chunk_seq;
+}
+
+std::vector<pvcgel_v1_CommandReply> DdsClient::take_replies() {
+  std::vector<pvcgel_v1_CommandReply> out;
+  out.swap(stray_replies_);
+  void* samples[64] = {};
+  dds_sample_info_t infos[64];
+  for (;;) {
+    const int n = dds_take(reply_reader_.get(), samples, infos, 64, 64);
+    if (n <= 0) break;
+    for (int i = 0; i < n; ++i) {
+      if (!infos[i].valid_data) continue;
+      const auto* r = static_cast<const pvcgel_v1_CommandReply*>(samples[i]);
+      if (opt_.rig == r->rig_id && client_id_ == r->client_id) out.push_back(*r);
+    }
+    dds_return_loan(reply_reader_.get(), samples, n);
+  }
+  return out;
+}
+
+Reply DdsClient::wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject) {
+  const auto deadline = Clock::now() + std::chrono::duration<double>(opt_.wait_s);
+  for (;;) {
+    auto replies = take_replies();
+    for (auto it = replies.begin(); it != replies.end(); ++it) {
+      if (it->seq != seq || it->is_trajectory != is_trajectory) continue;
+      Reply r{it->accepted, static_cast<daemon::RejectReason>(it->reason), it->detail};
+      replies.erase(it);
+      stray_replies_.insert(stray_replies_.end(), replies.begin(), replies.end());
+      if (!r.accepted && throw_on_reject)
+        throw Rejected(std::string(what) + " rejected by rig '" + opt_.rig + "': " +
+                           std::string(daemon::to_string(r.reason)) + (r.detail.empty() ? "" : ": " + r.detail),
+                       r);
+      poll_status();
+      return r;
+    }
+    stray_replies_.insert(stray_replies_.end(), replies.begin(), replies.end());
+    if (stray_replies_.size() > 256) stray_replies_.erase(stray_replies_.begin(), stray_replies_.begin() + 128);
+    if (Clock::now() > deadline)
+      throw std::runtime_error(std::string("no reply to the ") + what + " from rig '" + opt_.rig + "' within " +
+                               std::to_string(opt_.wait_s) + " s (daemon busy or gone?)");
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+}
+
+Reply DdsClient::command(daemon::CommandKind kind, std::uint8_t argument, bool throw_on_reject) {
+  if (!status_) connect();
+  static constexpr const char* kNames[] = {"?", "arm", "start", "stop", "reset", "mode", "target", "clear"};
+  const auto k = static_cast<std::size_t>(kind);
+  const std::string what = std::string("command '") + (k < std::size(kNames) ? kNames[k] : "?") + "'";
+  return wait_reply(publish_command(kind, argument), false, what.c_str(), throw_on_reject);
+}
+
+Reply DdsClient::send(pvcgel_v1_Trajectory& t, bool throw_on_reject) {
+  if (!status_) connect();
+  return wait_reply(publish_trajectory(t), true, "trajectory", throw_on_reject);
+}
+
+std::vector<pvcgel_v1_Telemetry> DdsClient::take_telemetry(int max) {
+  std::vector<pvcgel_v1_Telemetry> out;
+  if (telemetry_reader_.get() == 0) return out;
+  void* samples[256] = {};
+  dds_sample_info_t infos[256];
+  while (static_cast<int>(out.size()) < max) {
+    const int n = dds_take(telemetry_reader_.get(), samples, infos, 256, 256);
+    if (n <= 0) break;
+    for (int i = 0; i < n; ++i)
+      if (infos[i].valid_data && opt_.rig == static_cast<const pvcgel_v1_Telemetry*>(samples[i])->rig_id)
+        out.push_back(*static_cast<const pvcgel_v1_Telemetry*>(samples[i]));
+    dds_return_loan(telemetry_reader_.get(), samples, n);
+  }
+  return out;
+}
+
+}  // namespace pvcgel::tools

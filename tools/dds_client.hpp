@@ -1,0 +1,91 @@
+#pragma once
+/// @file
+/// A DDS client of one rig: finds its daemon, sends commands and trajectories
+/// and waits for the replies, reads Status and Telemetry. Used by the `pvcgel`
+/// client subcommands (and by `ident --rig`).
+
+#include <CLI/CLI.hpp>
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/dds/dds_participant.hpp"
+#include "daemon/input_validation.hpp"
+#include "pvcgel_v1.h"
+
+namespace pvcgel::tools {
+
+/// Where the rig is: the options every client subcommand takes.
+struct ClientOptions {
+  std::string rig = "rig1";
+  int domain = 0;
+  /// Cyclone DDS XML; default from $PVCGEL_DDS_CONFIG.
+  std::string dds_config;
+  /// How long to look for the daemon and to wait for replies (s).
+  double wait_s = 5.0;
+};
+
+/// Adds --rig, --domain, --dds-config, --wait to a subcommand.
+void add_client_options(CLI::App& cmd, ClientOptions& o);
+
+/// The daemon's answer to one command or chunk.
+struct Reply {
+  bool accepted = false;
+  daemon::RejectReason reason = daemon::RejectReason::accepted;
+  std::string detail;
+};
+
+/// Thrown when the daemon refused a command or chunk; what() names the reason.
+class Rejected : public std::runtime_error {
+ public:
+  Rejected(const std::string& what, Reply r) : std::runtime_error(what), reply(std::move(r)) {}
+  Reply reply;
+};
+
+/// One client connection to one rig.
+class DdsClient final {
+ public:
+  /// Joins DDS (with `o.dds_config`, required) and creates every endpoint.
+  /// @param telemetry  also read Telemetry (best-effort unless `reliable_telemetry`)
+  explicit DdsClient(const ClientOptions& o, bool telemetry = false, bool reliable_telemetry = false);
+
+  /// Wait for the rig's Status, then until the daemon's readers and writers
+  /// have matched ours. @throws std::runtime_error "no daemon found within N s"
+  /// or "rig 'X' unknown; rigs seen: ...".
+  const pvcgel_v1_Status& connect();
+  /// Latest Status of the rig (call connect() first); refreshed by every wait.
+  const pvcgel_v1_Status& status();
+  /// Send a command and wait for its reply. @throws Rejected, std::runtime_error (no reply).
+  Reply command(daemon::CommandKind kind, std::uint8_t argument = 0, bool throw_on_reject = true);
+  /// Send a trajectory (rig_id, client_id, chunk_seq and publish time are
+  /// filled in) and wait for its reply. @throws Rejected, std::runtime_error.
+  Reply send(pvcgel_v1_Trajectory& t, bool throw_on_reject = true);
+  /// Publish without waiting (for flood tests): returns the seq used.
+  std::uint64_t publish_command(daemon::CommandKind kind, std::uint8_t argument);
+  std::uint64_t publish_trajectory(pvcgel_v1_Trajectory& t);
+  /// Take every reply that arrived (for flood tests).
+  std::vector<pvcgel_v1_CommandReply> take_replies();
+  /// Take Telemetry samples of this rig that arrived (needs `telemetry`).
+  std::vector<pvcgel_v1_Telemetry> take_telemetry(int max = 1024);
+  [[nodiscard]] const std::string& client_id() const noexcept { return client_id_; }
+  [[nodiscard]] const ClientOptions& options() const noexcept { return opt_; }
+
+ private:
+  Reply wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject);
+  void poll_status();
+  bool matched_daemon(dds_entity_t endpoint, bool is_writer);
+
+  ClientOptions opt_;
+  std::string client_id_;
+  std::uint64_t next_seq_;
+  dds::Entity participant_, telemetry_topic_, trajectory_topic_, command_topic_, reply_topic_, status_topic_;
+  dds::Entity telemetry_reader_, trajectory_writer_, command_writer_, reply_reader_, status_reader_;
+  std::optional<pvcgel_v1_Status> status_;
+  dds_guid_t daemon_participant_{};
+  std::vector<std::string> other_rigs_;
+  std::vector<pvcgel_v1_CommandReply> stray_replies_;
+};
+
+}  // namespace pvcgel::tools
