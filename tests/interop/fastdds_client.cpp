@@ -421,8 +421,8 @@ int run_drive(const Options& o) {
   execute(kStop, "stop");
   c.pump_for(0.3);
   if (last_status) print_status(*last_status);
-  std::cout << "telemetry samples " << c.telemetry_samples() << ", status samples " << c.status_samples()
-            << std::endl;
+  std::cout << "telemetry samples " << c.telemetry_samples() << ", other rigs " << c.other_rig_samples()
+            << ", status samples " << c.status_samples() << std::endl;
   return 0;
 }
 

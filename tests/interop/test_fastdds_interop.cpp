@@ -214,10 +214,12 @@ TEST(FastDdsInterop, ReceivesBestEffortTelemetry) {
 
 // The Fast DDS client arms and starts the idle daemon, holds 60 um, plays a
 // sine from there and stops; every step is answered and executed, and the
-// daemon's Status counts it.
+// daemon's Status counts it. A second daemon on the domain, another rig id,
+// is addressed by none of it.
 TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
   const std::string csv_path = temp_path("drive.csv");
   Process daemon(kDaemon, {"--config", daemon_config("interop_rig_c", ""), "--duration", "60"});
+  Process bystander(kDaemon, {"--config", daemon_config("interop_rig_other", ""), "--duration", "60"});
   Process client(kClient,
                       {"--profile", kFastDdsXml, "--domain", std::to_string(kDomain), "--rig", "interop_rig_c", "--wait",
                        "10", "drive", "--out", csv_path, "--level", "60", "--blend", "1", "--hold", "3", "--amplitude",
@@ -226,6 +228,14 @@ TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
   ASSERT_EQ(client_result.exit_code, 0) << client_result.out << client_result.err << "\ndaemon:\n" << daemon.err_so_far();
   const auto daemon_result = daemon.stop();
   EXPECT_EQ(daemon_result.exit_code, 0) << daemon_result.err;
+  const auto bystander_result = bystander.stop();
+  EXPECT_EQ(bystander_result.exit_code, 0) << bystander_result.err;
+  EXPECT_EQ(bystander_result.err.find("ARMED"), std::string::npos) << bystander_result.err;
+  EXPECT_EQ(bystander_result.err.find("RUNNING"), std::string::npos) << bystander_result.err;
+  // Its telemetry reached the client too, told apart by the key.
+  const auto other = client_result.out.find("other rigs ");
+  ASSERT_NE(other, std::string::npos) << client_result.out;
+  EXPECT_GT(std::stoul(client_result.out.substr(other + 11)), 1000u) << client_result.out;
 
   // Every command and chunk answered "accepted" by the daemon over CommandReply.
   const std::string& out = client_result.out;
