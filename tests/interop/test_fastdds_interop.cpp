@@ -300,6 +300,36 @@ TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
   EXPECT_LT(sine_e, 2.0) << "the daemon e2e test's bound for a 0.5 Hz reference";
 }
 
+// The client refuses a Fast DDS profile that would leave loopback, before it
+// creates a participant (so nothing is sent).
+TEST(FastDdsInterop, ClientRefusesAProfileThatLeavesLoopback) {
+  const std::string shipped = pvcgel::test::slurp(kFastDdsXml);
+  struct Edit {
+    const char* from;
+    const char* to;
+    const char* message;
+  };
+  for (const Edit& edit :
+       {Edit{"<useBuiltinTransports>false</useBuiltinTransports>", "<useBuiltinTransports>true</useBuiltinTransports>",
+             "useBuiltinTransports must be false"},
+        Edit{"<metatrafficUnicastLocatorList>", "<metatrafficMulticastLocatorList><locator><udpv4><address>239.255.0.1"
+                                                "</address></udpv4></locator></metatrafficMulticastLocatorList>"
+                                                "<metatrafficUnicastLocatorList>",
+             "discovery must be unicast"}}) {
+    std::string xml = shipped;
+    const auto pos = xml.find(edit.from);
+    ASSERT_NE(pos, std::string::npos) << "the shipped profile no longer has " << edit.from;
+    xml.replace(pos, std::strlen(edit.from), edit.to);
+    const std::string path = temp_path("bad_profile.xml");
+    std::ofstream(path) << xml;
+    const auto r = pvcgel::test::run_program(
+        kClient, {"--profile", path, "--domain", std::to_string(kDomain), "--wait", "1", "listen", "--out",
+                  temp_path("never.csv")});
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_NE(r.err.find(edit.message), std::string::npos) << r.err;
+  }
+}
+
 // --- this process as a Cyclone DDS peer -------------------------------------
 
 using pvcgel::dds::Entity;
