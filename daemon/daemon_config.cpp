@@ -87,6 +87,9 @@ DaemonConfig load_daemon_config(const std::string& path) {
     if (cfg.dds.rig_id.empty() || cfg.dds.rig_id.size() > 32)
       throw ConfigError(d.key("rig_id"), "must be 1..32 characters");
     cfg.dds.reliable_telemetry = d.boolean("reliable_telemetry", false);
+    cfg.dds.realtime_priority = d.integer("realtime_priority", 0);
+    if (cfg.dds.realtime_priority < 0 || cfg.dds.realtime_priority >= cfg.realtime.priority)
+      throw ConfigError(d.key("realtime_priority"), "must be 0 (off) or 1..[loop] priority - 1 (the loop stays above DDS)");
     cfg.dds.telemetry_decimation = d.integer("telemetry_decimation", 1);
     if (cfg.dds.telemetry_decimation < 1 || cfg.dds.telemetry_decimation > 1000)
       throw ConfigError(d.key("telemetry_decimation"), "must be 1..1000 (publish every n-th cycle)");

@@ -1,5 +1,8 @@
 #include "daemon/dds_bridge.hpp"
 
+#include <pthread.h>
+#include <sched.h>
+
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -73,6 +76,11 @@ DdsBridge::~DdsBridge() {
 }
 
 void DdsBridge::run() {
+  if (settings_.realtime_priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = settings_.realtime_priority;
+    realtime_ = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0;
+  }
   double last_status_s = 0.0;
   LoopSnapshot last{};
   bool first = true;

@@ -49,6 +49,8 @@ class DdsBridge final {
   /// Telemetry writer, for the record consumer thread.
   TelemetryPublisher& telemetry() noexcept { return *telemetry_; }
   [[nodiscard]] const BridgeCounters& counters() const noexcept { return counters_; }
+  /// Whether the bridge thread got its real-time priority (known once it runs).
+  [[nodiscard]] bool realtime() const noexcept { return realtime_.load(); }
 
  private:
   struct Pending {
@@ -83,6 +85,7 @@ class DdsBridge final {
   std::uint8_t last_reject_reason_ = 0;
   std::string last_reject_detail_;
   std::atomic<bool> stop_{false};
+  std::atomic<bool> realtime_{false};
   std::thread thread_;
 };
 

@@ -98,16 +98,17 @@ int run(const Options& opt) {
   auto ring = std::make_unique<RecordRing>();
   auto latest = std::make_unique<LatestRecord>();
   std::atomic<bool> started{false}, loop_done{false};
-  std::thread rt([&] {
-    run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
-    loop_done.store(true, std::memory_order_release);
-  });
+  // DDS before the loop thread: joining may fail (a configuration error) and nothing may be running then.
   std::unique_ptr<DdsBridge> bridge;
   if (cfg.dds_enabled)
     bridge = std::make_unique<DdsBridge>(cfg.dds, cfg.setpoint_limits, *io, *stats,
                                          DaemonIdentity{cfg.config_hash, PVCGEL_VERSION, std::string(hal.name()),
                                                         cfg.realtime.period_s});
   TelemetryPublisher* publisher = bridge ? &bridge->telemetry() : nullptr;
+  std::thread rt([&] {
+    run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
+    loop_done.store(true, std::memory_order_release);
+  });
   // The one consumer of the loop's records: recording and telemetry, off the RT thread.
   std::exception_ptr writer_error;
   std::thread writer([&] {

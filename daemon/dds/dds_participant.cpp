@@ -32,7 +32,16 @@ Entity make_participant(const DdsSettings& s) {
                              "start with the default, which discovers over every multicast interface");
   if (!std::filesystem::exists(s.config_path))
     throw std::runtime_error("DDS: configuration file '" + s.config_path + "' not found");
-  const std::string uri = "file://" + std::filesystem::absolute(s.config_path).string();
+  std::string uri = "file://" + std::filesystem::absolute(s.config_path).string();
+  if (s.realtime_priority > 0) {
+    // Setpoints arrive through these threads: give them real-time priority so
+    // a busy machine does not delay them (the loop itself stays above them).
+    std::string threads;
+    for (const char* name : {"recv", "dq.user"})
+      threads += std::string("<Thread name=\"") + name + "\"><Scheduling><Class>realtime</Class><Priority>" +
+                 std::to_string(s.realtime_priority) + "</Priority></Scheduling></Thread>";
+    uri += ",<CycloneDDS><Domain id=\"any\"><Threads>" + threads + "</Threads></Domain></CycloneDDS>";
+  }
   setenv("CYCLONEDDS_URI", uri.c_str(), 1);
   return Entity(dds_create_participant(static_cast<dds_domainid_t>(s.domain), nullptr, nullptr), "participant");
 }

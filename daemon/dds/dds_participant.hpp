@@ -36,6 +36,9 @@ struct DdsSettings {
   bool reliable_telemetry = false;
   /// Publish every n-th cycle (1: every cycle).
   int telemetry_decimation = 1;
+  /// SCHED_FIFO priority for Cyclone's receive and delivery threads and the
+  /// daemon's DDS bridge (below the loop's); 0: normal scheduling.
+  int realtime_priority = 0;
 };
 
 /// Topic names (the IDL documents each).
