@@ -37,17 +37,20 @@ std::string temp_path(const std::string& name) {
 /// reliable (or best-effort) telemetry, and the start-up trajectory replaced (or removed).
 std::string daemon_config(const std::string& rig_id, const std::string& trajectory, bool reliable_telemetry = true) {
   std::string text = pvcgel::test::slurp(kSourceDir + "/config/pvcgeld-sim.toml");
-  const auto replace_line = [&](const std::string& starts, const std::string& line) {
-    const auto pos = text.find("\n" + starts);
-    if (pos == std::string::npos) throw std::runtime_error("sim config has no line starting with " + starts);
+  // Replaces the first line of table `table` that starts with `starts`.
+  const auto replace_line = [&](const std::string& table, const std::string& starts, const std::string& line) {
+    const auto header = text.find("\n[" + table + "]\n");
+    const auto pos = header == std::string::npos ? header : text.find("\n" + starts, header + 1);
+    if (pos == std::string::npos || pos > text.find("\n[", header + 1))
+      throw std::runtime_error("sim config has no line starting with '" + starts + "' in [" + table + "]");
     text.replace(pos + 1, text.find('\n', pos + 1) - pos - 1, line);
   };
-  replace_line("enabled = ", "enabled = true");
-  replace_line("domain = ", "domain = " + std::to_string(kDomain));
-  replace_line("rig_id = ", "rig_id = \"" + rig_id + "\"");
-  replace_line("reliable_telemetry = ", reliable_telemetry ? "reliable_telemetry = true" : "reliable_telemetry = false");
-  replace_line("config = ", "config = \"" + kCycloneXml + "\"");
-  replace_line("trajectory = ", trajectory.empty() ? "" : "trajectory = \"" + trajectory + "\"");
+  replace_line("dds", "enabled = ", "enabled = true");
+  replace_line("dds", "domain = ", "domain = " + std::to_string(kDomain));
+  replace_line("dds", "rig_id = ", "rig_id = \"" + rig_id + "\"");
+  replace_line("dds", "reliable_telemetry = ", reliable_telemetry ? "reliable_telemetry = true" : "reliable_telemetry = false");
+  replace_line("dds", "config = ", "config = \"" + kCycloneXml + "\"");
+  replace_line("run", "trajectory = ", trajectory.empty() ? "" : "trajectory = \"" + trajectory + "\"");
   const std::string path = temp_path(rig_id + ".toml");
   std::ofstream(path) << text;
   return path;
