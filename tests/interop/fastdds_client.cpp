@@ -21,6 +21,7 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cinttypes>
 #include <cstdio>
@@ -258,26 +259,41 @@ class Client final {
     if (!trajectory_->write(&t)) fail("Trajectory write failed");
   }
 
-  /// Waits for the reply to (seq, is_trajectory); throws on timeout or rejection.
-  v1::CommandReply await_reply(uint64_t seq, bool is_trajectory, const std::string& what) {
-    std::optional<v1::CommandReply> got;
-    const bool ok = pump_until(
-        [&] {
-          for (const auto& r : replies_)
-            if (r.seq() == seq && r.is_trajectory() == is_trajectory) got = r;
-          return got.has_value();
-        },
-        5.0);
-    if (!ok) fail("no CommandReply for " + what + " within 5 s");
-    if (!got->accepted())
-      fail(what + " rejected: reason " + std::to_string(got->reason()) + " (" + got->detail().to_string() + ")");
-    return *got;
+  /// Calls `send` until the daemon answers (seq, is_trajectory): again after
+  /// each second without an answer, five times at most; throws when refused
+  /// or unanswered. Why again: discovery is asynchronous, so our writer can
+  /// match the daemon's volatile reader before that reader has matched our
+  /// writer, and the reader drops (never delivers late) what arrives in
+  /// between. Only the first exchange on each topic can fall into that window.
+  v1::CommandReply request(const std::function<void()>& send, uint64_t seq, bool is_trajectory,
+                           const std::string& what) {
+    constexpr int kTries = 5;
+    for (int attempt = 1; attempt <= kTries; ++attempt) {
+      send();
+      if (pump_until([&] { return first_reply(seq, is_trajectory) != nullptr; }, 1.0)) {
+        const v1::CommandReply& r = *first_reply(seq, is_trajectory);
+        if (!r.accepted())
+          fail(what + " rejected: reason " + std::to_string(r.reason()) + " (" + r.detail().to_string() + ")");
+        return r;
+      }
+      std::cout << "no reply to " << what << " within 1 s (try " << attempt << " of " << kTries << ")" << std::endl;
+    }
+    fail("no CommandReply for " + what + " within " + std::to_string(kTries) + " s");
   }
 
-  /// Makes sure reliable samples reached every matched reader before we go.
-  void flush() {
-    command_->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2.0));
-    trajectory_->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2.0));
+  /// The first reply to (seq, is_trajectory), or null.
+  [[nodiscard]] const v1::CommandReply* first_reply(uint64_t seq, bool is_trajectory) const {
+    for (const auto& r : replies_)
+      if (r.seq() == seq && r.is_trajectory() == is_trajectory) return &r;
+    return nullptr;
+  }
+
+  /// Replies received: commands accepted, chunks accepted, refusals (as the daemon counts them in Status).
+  [[nodiscard]] std::string reply_counts() const {
+    uint64_t commands = 0, chunks = 0, rejected = 0;
+    for (const auto& r : replies_) (r.accepted() ? (r.is_trajectory() ? chunks : commands) : rejected) += 1;
+    return "commands_accepted=" + std::to_string(commands) + " chunks_accepted=" + std::to_string(chunks) +
+           " rejects_total=" + std::to_string(rejected);
   }
 
   static int64_t realtime_ns() {
@@ -391,8 +407,11 @@ int run_drive(const Options& o) {
 
   uint64_t seq = 0;
   auto execute = [&](uint8_t kind, const char* what) {
-    c.send(command(++seq, kind));
-    c.await_reply(seq, false, what);
+    const v1::Command cmd = command(++seq, kind);
+    c.request([&] { c.send(cmd); }, seq, false, what);
+  };
+  auto play = [&](const v1::Trajectory& t, const char* what) {
+    c.request([&] { c.send(t); }, t.chunk_seq(), true, what);
   };
   if (c.last_telemetry().state() == kStateRunning) {
     std::cout << "rig already RUNNING: arm and start skipped" << std::endl;
@@ -404,23 +423,22 @@ int run_drive(const Options& o) {
     fail("rig not RUNNING 5 s after an accepted start");
 
   // Chunk numbers: 1 the hold, 2 the sine (the telemetry echoes them).
-  c.send(segment(1, kHold, {o.level_um}, o.blend_s));
-  std::cout << "sent chunk=1 kind=hold level_um=" << exact(o.level_um) << " blend_s=" << exact(o.blend_s)
+  std::cout << "sending chunk=1 kind=hold level_um=" << exact(o.level_um) << " blend_s=" << exact(o.blend_s)
             << " at_t_s=" << exact(c.last_telemetry().t_s()) << std::endl;
-  c.await_reply(1, true, "hold trajectory");
+  play(segment(1, kHold, {o.level_um}, o.blend_s), "hold trajectory");
   c.pump_for(o.hold_s);
 
   // The sine starts at the hold level with zero phase: no step.
-  c.send(segment(2, kSine, {o.level_um, o.sine_amplitude_um, o.sine_freq_Hz, 0.0}, 0.0));
-  std::cout << "sent chunk=2 kind=sine offset_um=" << exact(o.level_um) << " amplitude_um="
+  std::cout << "sending chunk=2 kind=sine offset_um=" << exact(o.level_um) << " amplitude_um="
             << exact(o.sine_amplitude_um) << " freq_Hz=" << exact(o.sine_freq_Hz)
             << " at_t_s=" << exact(c.last_telemetry().t_s()) << std::endl;
-  c.await_reply(2, true, "sine trajectory");
+  play(segment(2, kSine, {o.level_um, o.sine_amplitude_um, o.sine_freq_Hz, 0.0}, 0.0), "sine trajectory");
   c.pump_for(o.sine_s);
 
   execute(kStop, "stop");
   c.pump_for(0.3);
   if (last_status) print_status(*last_status);
+  std::cout << "replies " << c.reply_counts() << std::endl;
   std::cout << "telemetry samples " << c.telemetry_samples() << ", other rigs " << c.other_rig_samples()
             << ", status samples " << c.status_samples() << std::endl;
   return 0;
@@ -440,7 +458,7 @@ int run_echo(const Options& o) {
   c.wait_for_matches(o.wait_s, "the peer");
   // Field values derive from --seq (the peer checks them by the same rule).
   const auto s = static_cast<double>(o.seq);
-  c.send(command(o.seq + 1, kClear, 255));
+  const v1::Command cmd = command(o.seq + 1, kClear, 255);
   v1::Trajectory t;
   t.chunk_seq(o.seq);
   t.publish_time_ns(-static_cast<int64_t>(o.seq));
@@ -452,10 +470,16 @@ int run_echo(const Options& o) {
   t.duration_s(0.25);
   t.blend_s(0.125);
   t.values(o.values);
-  c.send(t);
-  c.flush();
-  if (!c.pump_until([&] { return got_status && got_reply; }, o.wait_s))
-    fail(std::string("no ") + (got_status ? "CommandReply" : "Status") + " within " + exact(o.wait_s) + " s");
+  // Sent again each second until the peer answers (see Client::request); the peer reads the first.
+  const auto deadline = Clock::now() + std::chrono::duration<double>(o.wait_s);
+  while (!got_reply && Clock::now() < deadline) {
+    c.send(cmd);
+    c.send(t);
+    c.pump_until([&] { return got_reply; }, 1.0);
+  }
+  const double left_s = std::chrono::duration<double>(deadline - Clock::now()).count();
+  if (!c.pump_until([&] { return got_status && got_reply; }, std::max(0.0, left_s)))
+    fail(std::string("no ") + (got_reply ? "Status" : "CommandReply") + " within " + exact(o.wait_s) + " s");
   return 0;
 }
 
