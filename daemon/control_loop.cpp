@@ -56,7 +56,8 @@ double ControlLoop::reference_at(double t_run) const noexcept {
   // starting never steps the reference.
   double base = 0.0;
   base_reference(t_run, base);
-  const double T = safety_.soft_start_s;
+  // Open loop has no measured position to blend from: voltage segments carry their own blend.
+  const double T = target_.load(std::memory_order_relaxed) == LoopTarget::voltage ? 0.0 : safety_.soft_start_s;
   if (t_run < T) {
     const double s = 0.5 * (1.0 - std::cos(std::numbers::pi * t_run / T));
     return start_value_ + (base - start_value_) * s;

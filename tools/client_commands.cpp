@@ -298,7 +298,7 @@ void add_client_commands(CLI::App& app) {
     cmd->callback([opt] {
       run_client([&] {
         DdsClient c(*opt);
-        print_status(c.connect());
+        print_status(c.fresh_status());
       });
     });
   }

@@ -55,18 +55,10 @@ DdsClient::DdsClient(const ClientOptions& o, bool telemetry, bool reliable_telem
   s.rig_id = opt_.rig;
   participant_ = dds::make_participant(s);
   const dds_entity_t p = participant_.get();
-  trajectory_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Trajectory_desc, dds::kTrajectoryTopic, nullptr, nullptr),
-                                  "Trajectory topic");
-  command_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Command_desc, dds::kCommandTopic, nullptr, nullptr),
-                               "Command topic");
   reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
                              "CommandReply topic");
   status_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Status_desc, dds::kStatusTopic, nullptr, nullptr),
                               "Status topic");
-  trajectory_writer_ = dds::Entity(dds_create_writer(p, trajectory_topic_.get(), dds::trajectory_qos(false).get(), nullptr),
-                                   "Trajectory writer");
-  command_writer_ = dds::Entity(dds_create_writer(p, command_topic_.get(), dds::command_qos(false).get(), nullptr),
-                                "Command writer");
   reply_reader_ = dds::Entity(dds_create_reader(p, reply_topic_.get(), dds::reply_qos().get(), nullptr), "CommandReply reader");
   status_reader_ = dds::Entity(dds_create_reader(p, status_topic_.get(), dds::status_qos().get(), nullptr), "Status reader");
   if (telemetry) {
@@ -92,11 +84,10 @@ void DdsClient::poll_status() {
           other_rigs_.emplace_back(s->rig_id);
         continue;
       }
-      if (!status_) {
-        if (auto* ep = dds_get_matched_publication_data(status_reader_.get(), infos[i].publication_handle)) {
-          daemon_participant_ = ep->participant_key;
-          dds_builtintopic_free_endpoint(ep);
-        }
+      if (auto* ep = dds_get_matched_publication_data(status_reader_.get(), infos[i].publication_handle)) {
+        if (!status_) daemon_participant_ = ep->participant_key;
+        else if (!same_guid(ep->participant_key, daemon_participant_)) duplicate_rig_ = true;
+        dds_builtintopic_free_endpoint(ep);
       }
       status_ = *s;
     }
@@ -135,10 +126,14 @@ const pvcgel_v1_Status& DdsClient::connect() {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
-  // Reliable volatile topics: a sample written before the daemon's reader has
-  // matched ours would be lost, so wait for every match with this daemon.
-  while (!(matched_daemon(command_writer_.get(), true) && matched_daemon(trajectory_writer_.get(), true) &&
-           matched_daemon(reply_reader_.get(), false) &&
+  // Two daemons configured with one rig id would both obey every command: refuse to talk to either.
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  poll_status();
+  if (duplicate_rig_)
+    throw std::runtime_error("two daemons on domain " + std::to_string(opt_.domain) + " claim rig '" + opt_.rig +
+                             "': give each rig its own [dds] rig_id");
+  // A reply or sample sent before the daemon's writer matched our reader would be lost.
+  while (!(matched_daemon(reply_reader_.get(), false) &&
            (telemetry_reader_.get() == 0 || matched_daemon(telemetry_reader_.get(), false)))) {
     if (Clock::now() > deadline)
       throw std::runtime_error("found rig '" + opt_.rig + "' but its command endpoints did not match within " +
@@ -148,6 +143,41 @@ const pvcgel_v1_Status& DdsClient::connect() {
   return *status_;
 }
 
+const pvcgel_v1_Status& DdsClient::fresh_status() {
+  const double t0 = connect().t_s;
+  // The sample a new reader gets first may predate the match; the daemon
+  // publishes at least every 0.5 s, so wait for the next one.
+  const auto deadline = Clock::now() + std::chrono::milliseconds(1500);
+  while (status_->t_s == t0 && Clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    poll_status();
+  }
+  return *status_;
+}
+
+void DdsClient::ensure_writers() {
+  if (command_writer_.get() != 0) return;
+  if (!status_) connect();
+  // Created only when needed, so a read-only identity (DDS Security) can still watch and record.
+  const dds_entity_t p = participant_.get();
+  trajectory_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Trajectory_desc, dds::kTrajectoryTopic, nullptr, nullptr),
+                                  "Trajectory topic");
+  command_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Command_desc, dds::kCommandTopic, nullptr, nullptr),
+                               "Command topic");
+  trajectory_writer_ = dds::Entity(dds_create_writer(p, trajectory_topic_.get(), dds::trajectory_qos(false).get(), nullptr),
+                                   "Trajectory writer");
+  command_writer_ = dds::Entity(dds_create_writer(p, command_topic_.get(), dds::command_qos(false).get(), nullptr),
+                                "Command writer");
+  // Reliable volatile: a sample written before the daemon's reader matched ours would be lost.
+  const auto deadline = Clock::now() + std::chrono::duration<double>(opt_.wait_s);
+  while (!(matched_daemon(command_writer_.get(), true) && matched_daemon(trajectory_writer_.get(), true))) {
+    if (Clock::now() > deadline)
+      throw std::runtime_error("rig '" + opt_.rig + "' did not accept our command endpoints within " +
+                               std::to_string(opt_.wait_s) + " s (QoS mismatch, or not permitted by DDS Security?)");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
+
 const pvcgel_v1_Status& DdsClient::status() {
   poll_status();
   if (!status_) return connect();
@@ -155,6 +185,7 @@ const pvcgel_v1_Status& DdsClient::status() {
 }
 
 std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t argument) {
+  ensure_writers();
   pvcgel_v1_Command c{};
   copy_string(c.rig_id, opt_.rig);
   copy_string(c.client_id, client_id_);
@@ -167,6 +198,7 @@ std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t 
 }
 
 std::uint64_t DdsClient::publish_trajectory(pvcgel_v1_Trajectory& t) {
+  ensure_writers();
   copy_string(t.rig_id, opt_.rig);
   copy_string(t.client_id, client_id_);
   t.chunk_seq = ++next_seq_;

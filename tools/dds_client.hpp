@@ -55,6 +55,8 @@ class DdsClient final {
   /// have matched ours. @throws std::runtime_error "no daemon found within N s"
   /// or "rig 'X' unknown; rigs seen: ...".
   const pvcgel_v1_Status& connect();
+  /// A Status published after this client matched the daemon (waits up to 1.5 s).
+  const pvcgel_v1_Status& fresh_status();
   /// Latest Status of the rig (call connect() first); refreshed by every wait.
   const pvcgel_v1_Status& status();
   /// Send a command and wait for its reply. @throws Rejected, std::runtime_error (no reply).
@@ -75,6 +77,7 @@ class DdsClient final {
  private:
   Reply wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject);
   void poll_status();
+  void ensure_writers();
   bool matched_daemon(dds_entity_t endpoint, bool is_writer);
 
   ClientOptions opt_;
@@ -85,6 +88,7 @@ class DdsClient final {
   std::optional<pvcgel_v1_Status> status_;
   dds_guid_t daemon_participant_{};
   std::vector<std::string> other_rigs_;
+  bool duplicate_rig_ = false;
   std::vector<pvcgel_v1_CommandReply> stray_replies_;
 };
 

@@ -1,4 +1,5 @@
 #include "tools/ident_command.hpp"
+#include "tools/ident_rig.hpp"
 
 #include <toml++/toml.h>
 
@@ -246,13 +247,32 @@ void write_sine_recording(const fs::path& path, const SineRecord& r,
 }
 
 IdentOutcome run_ident(const IdentArgs& a) {
-  if (a.rig)
-    throw std::runtime_error(
-        "--rig: identification on a running pvcgeld is not available until the DDS interface exists. Use --sim, or "
-        "--from DIR with recordings (pvcgeld format) of open-loop sine voltages u = B + A sin(2 pi f t), one per file");
-  if (static_cast<int>(a.sim) + static_cast<int>(!a.from.empty()) != 1)
-    throw std::runtime_error("give exactly one of --sim, --from DIR or --rig");
-  if (!a.save_recordings.empty() && !a.sim) throw std::runtime_error("--save-recordings needs --sim");
+  if (static_cast<int>(a.sim) + static_cast<int>(!a.from.empty()) + static_cast<int>(!a.rig.empty()) != 1)
+    throw std::runtime_error("give exactly one of --sim, --from DIR or --rig ID");
+  if (!a.save_recordings.empty() && a.sim + !a.rig.empty() == 0)
+    throw std::runtime_error("--save-recordings needs --sim or --rig");
+  if (!a.rig.empty()) {
+    // The experiments run on the rig and are kept as recordings; the fit is then
+    // exactly that of `--from` on them.
+    ClientOptions o;
+    o.rig = a.rig;
+    o.domain = a.domain;
+    o.dds_config = a.dds_config;
+    if (o.dds_config.empty())
+      if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
+    char stamp[32];
+    const std::time_t now = std::time(nullptr);
+    std::strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%S", std::gmtime(&now));
+    const fs::path dir = a.save_recordings.empty() ? fs::path("ident-" + a.rig + "-" + stamp) : fs::path(a.save_recordings);
+    const std::string rig_line = run_plan_on_rig(a, o, dir);
+    IdentArgs b = a;
+    b.rig.clear();
+    b.save_recordings.clear();
+    b.from = dir.string();
+    IdentOutcome o2 = run_ident(b);
+    o2.summary = rig_line + o2.summary;
+    return o2;
+  }
 
   const bool progress = !a.quiet;
   std::vector<FrequencyResponsePoint> points;
@@ -571,12 +591,16 @@ void add_ident_command(CLI::App& app) {
   auto a = std::make_shared<IdentArgs>();
   auto* c = app.add_subcommand("ident", "Describing-function system identification from sine experiments (paper Section III)");
   c->add_flag("--sim", a->sim, "run the excitation plan on the simulated rig (accelerated)");
-  c->add_flag("--rig", a->rig, "run the plan on a running pvcgeld over DDS (not available yet)");
+  c->add_option("--rig", a->rig, "run the plan on this rig (a running pvcgeld, open-loop voltage mode over DDS)");
+  c->add_option("--domain", a->domain, "--rig: DDS domain")->capture_default_str();
+  c->add_option("--dds-config", a->dds_config, "--rig: Cyclone DDS XML (default $PVCGEL_DDS_CONFIG)");
   c->add_option("--from", a->from, "directory of recordings (*.csv, pvcgeld format), one sine experiment each");
   c->add_option("--validation-dir", a->validation_dir, "held-out recordings for time-domain validation (default FROM/validation)");
   c->add_option("--out", a->out, "write the [model] table (poly, G_num, G_den) to FILE");
   c->add_option("--report", a->report, "write report.md and PNG plots to DIR");
-  c->add_option("--save-recordings", a->save_recordings, "--sim: also write every experiment as a recording to DIR");
+  c->add_option("--save-recordings", a->save_recordings,
+                "--sim: also write every experiment as a recording to DIR; --rig: where the recordings go "
+                "(default ident-RIG-TIME)");
   c->add_option("--config", a->config, "--sim: TOML file with a [sim] table (default: the paper rig)")->check(CLI::ExistingFile);
   c->add_flag("--ideal", a->ideal, "--sim: hysteresis and creep off (the truth is exactly a Hammerstein model)");
   c->add_option("--seed", a->seed, "--sim: sensor-noise seed")->capture_default_str();
@@ -598,6 +622,11 @@ void add_ident_command(CLI::App& app) {
   c->add_option("--tolerance", a->options.f.tolerance, "rule: residual within this fraction of the best")->capture_default_str();
   c->add_option("--voltage-max", a->options.f.voltage_max_V, "rule: f must be increasing on [0, this] V")->capture_default_str();
   c->add_option("--io-delay-samples", a->options.io_delay_samples, "the rig's I/O delay, removed before fitting G")->capture_default_str();
+  c->add_option("--validation-freqs", a->validation_frequencies_Hz,
+                "held-out experiments at these frequencies (Hz), at --validation-amplitude/--validation-bias")
+      ->capture_default_str();
+  c->add_option("--validation-amplitude", a->validation_amplitude_V, "held-out experiments' A (V)")->capture_default_str();
+  c->add_option("--validation-bias", a->validation_bias_V, "held-out experiments' B (V)")->capture_default_str();
   c->add_flag("--quiet", a->quiet, "no progress lines");
   c->callback([a, nopt] {
     if (nopt->count()) a->options.f.forced_terms = nopt->as<int>();

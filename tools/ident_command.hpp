@@ -2,7 +2,7 @@
 /// @file
 /// `pvcgel ident`: describing-function identification from sine experiments,
 /// on the simulated rig (`--sim`), from recordings (`--from DIR`), or on a
-/// running daemon (`--rig`, not available until the DDS interface exists).
+/// running daemon over DDS (`--rig ID`).
 
 #include <CLI/CLI.hpp>
 #include <cstdint>
@@ -21,12 +21,14 @@ namespace pvcgel::tools {
 /// Everything `pvcgel ident` can be told.
 struct IdentArgs {
   bool sim = false;              ///< run the plan on the simulated rig
-  bool rig = false;              ///< run the plan on a daemon over DDS (not available yet)
+  std::string rig;               ///< run the plan on this rig (a pvcgeld over DDS)
+  int domain = 0;                ///< --rig: DDS domain
+  std::string dds_config;        ///< --rig: Cyclone DDS XML (default $PVCGEL_DDS_CONFIG)
   std::string from;              ///< directory of recordings, one sine experiment per *.csv
   std::string validation_dir;    ///< held-out recordings (default: FROM/validation if present)
   std::string out;               ///< model TOML to write
   std::string report;            ///< directory for report.md and PNG plots
-  std::string save_recordings;   ///< --sim: write every experiment as a recording here
+  std::string save_recordings;   ///< --sim, --rig: write every experiment as a recording here
   std::string config;            ///< --sim: TOML with a [sim] table (default: the paper rig)
   bool ideal = false;            ///< --sim: hysteresis and creep off (truth exactly Hammerstein)
   std::uint64_t seed = 1;

@@ -10,6 +10,7 @@
 
 #include "daemon/dds/dds_participant.hpp"
 #include "daemon/recorder.hpp"
+#include "tools/dds_client.hpp"
 #include "pvcgel_v1.h"
 
 namespace pvcgel::tools {
@@ -122,12 +123,15 @@ void add_record_command(CLI::App& app) {
   auto* cmd = app.add_subcommand("record", "Record a rig's telemetry over DDS, lossless (reliable reader, gap check)");
   cmd->add_option("--out", args->out, "recording CSV to write (the daemon's format)")->required();
   cmd->add_option("--duration", args->duration, "seconds of telemetry to record")->capture_default_str()->check(CLI::PositiveNumber);
-  cmd->add_option("--rig", args->rig, "rig id to record")->capture_default_str();
-  cmd->add_option("--domain", args->domain, "DDS domain")->capture_default_str();
-  cmd->add_option("--dds-config", args->dds_config, "Cyclone DDS XML configuration (e.g. config/cyclonedds-loopback.xml)")
-      ->required()->check(CLI::ExistingFile);
-  cmd->add_option("--wait", args->wait, "give up when no sample arrives within this many seconds")->capture_default_str();
-  cmd->callback([args] {
+  auto client = std::make_shared<ClientOptions>();
+  add_client_options(*cmd, *client);
+  cmd->callback([args, client] {
+    args->rig = client->rig;
+    args->domain = client->domain;
+    args->dds_config = client->dds_config;
+    args->wait = client->wait_s;
+    if (args->dds_config.empty())
+      throw CLI::ValidationError("--dds-config", "no DDS configuration: pass --dds-config FILE or set PVCGEL_DDS_CONFIG");
     const int rc = record(*args);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });

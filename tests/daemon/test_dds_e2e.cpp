@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <deque>
+#include <filesystem>
 #include <cmath>
 #include <fstream>
 #include <regex>
@@ -26,12 +27,13 @@ const std::string kDdsConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/cyclone
 const std::string kSimConfig = std::string(PVCGEL_SOURCE_DIR) + "/config/pvcgeld-sim.toml";
 
 /// A daemon config: the shipped sim config, idle at start, on `domain` as `rig`.
-std::string write_config(const std::string& name, int domain, const std::string& rig, const std::string& extra = "") {
+std::string write_config(const std::string& name, int domain, const std::string& rig, const std::string& extra = "",
+                         const std::string& dds_xml = kDdsConfig) {
   std::string text = test::slurp(kSimConfig);
   text = std::regex_replace(text, std::regex("\ntrajectory = [^\n]*"), "\n");
   text = std::regex_replace(text, std::regex("\ndomain = 0"), "\ndomain = " + std::to_string(domain));
   text = std::regex_replace(text, std::regex("\nrig_id = \"rig1\""), "\nrig_id = \"" + rig + "\"");
-  text = std::regex_replace(text, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + kDdsConfig + "\"");
+  text = std::regex_replace(text, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + dds_xml + "\"");
   text += extra;
   const std::string path = ::testing::TempDir() + name + ".toml";
   std::ofstream(path) << text;
@@ -288,5 +290,85 @@ TEST(DdsE2E, AFloodOfChunksAndCommandsIsThrottledAndTheLoopKeepsItsTiming) {
   const double b = p999(before), d = p999(during);
   // Printed, not asserted: this shared CI machine's jitter is noise (see the benchmark for the comparison).
   std::cout << "[flood] wake-up latency p99.9: before " << b << " us, during " << d << " us, ratio " << d / b << "\n";
+  EXPECT_EQ(daemon.stop().exit_code, 0);
+}
+
+// DDS Security with test certificates (config/dds-security/make-test-pki.sh):
+// an authenticated client drives the rig, a read-only identity may watch but
+// not command, and a participant without credentials does not even see it.
+TEST(DdsE2E, SecuredModeAuthenticatesAndEnforcesPermissions) {
+  if (std::system("command -v openssl > /dev/null") != 0) GTEST_SKIP() << "skipped: openssl not installed";
+  if (std::system("test -e /usr/lib/x86_64-linux-gnu/libddsc0debian/libdds_security_auth.so") != 0)
+    GTEST_SKIP() << "skipped: Cyclone DDS Security plugins not installed";
+  const std::string pki = ::testing::TempDir() + "pvcgel_pki";
+  ASSERT_EQ(std::system(("rm -rf " + pki + " && " + PVCGEL_SOURCE_DIR + "/config/dds-security/make-test-pki.sh " + pki +
+                         " 16 > /dev/null")
+                            .c_str()),
+            0);
+  Process daemon(kDaemon, {"--config", write_config("secure", 16, "sec", "", pki + "/daemon.xml")});
+  const auto with = [&](const std::string& xml, std::vector<std::string> args, const char* wait = "10") {
+    args.insert(args.end(), {"--rig", "sec", "--domain", "16", "--dds-config", xml, "--wait", wait});
+    return run_program(kClient, args);
+  };
+  const auto started = with(pki + "/client.xml", {"start"});
+  EXPECT_EQ(started.exit_code, 0) << started.err;
+  const auto sent = with(pki + "/client.xml", {"send", "hold", "15", "--blend", "1"});
+  EXPECT_EQ(sent.exit_code, 0) << sent.err;
+  const auto observed = with(pki + "/observer.xml", {"status"});
+  EXPECT_EQ(observed.exit_code, 0) << observed.err;
+  EXPECT_NE(observed.out.find("RUNNING"), std::string::npos) << observed.out;
+  EXPECT_NE(observed.out.find("1 chunks"), std::string::npos) << observed.out;
+  const auto refused = with(pki + "/observer.xml", {"stop"});
+  EXPECT_NE(refused.exit_code, 0);
+  EXPECT_NE(refused.err.find("Not Allowed By Security"), std::string::npos) << refused.err;
+  const auto plain = with(kDdsConfig, {"status"}, "3");
+  EXPECT_EQ(plain.exit_code, 3) << "an unauthenticated participant does not see the rig: " << plain.err;
+  EXPECT_EQ(daemon.stop().exit_code, 0);
+}
+
+// `pvcgel ident --rig`: the excitation plan runs on the daemon in open-loop
+// voltage mode over DDS; the recordings are kept and the fitted model is one
+// the daemon accepts. (A short plan: one amplitude and bias, four frequencies.)
+TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
+  Process daemon(kDaemon, {"--config", write_config("ident", 17, "ident")});
+  const std::string dir = ::testing::TempDir() + "ident_rig_recordings";
+  const std::string model = ::testing::TempDir() + "ident_rig_model.toml";
+  std::filesystem::remove_all(dir);
+  const auto r = run_program(kClient, {"ident", "--rig", "ident", "--domain", "17", "--dds-config", kDdsConfig,
+                                       "--amplitudes", "300", "--biases", "450", "--freq-min", "0.3", "--freq-max", "5",
+                                       "--freq-count", "4", "--plan-settle", "1.5", "--min-analysed", "2",
+                                       "--validation-freqs", "2", "--save-recordings", dir, "--out", model});
+  ASSERT_EQ(r.exit_code, 0) << r.err << r.out;
+  EXPECT_NE(r.err.find("[5/5] A = 400 V, B = 450 V, f = 2.000 Hz"), std::string::npos) << r.err;
+  int files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    if (e.path().extension() != ".csv") continue;
+    ++files;
+    const auto rec = tools::read_recording(e.path().string());  // uniform time: no lost cycles
+    EXPECT_EQ(rec.skipped_rows, 0);
+  }
+  EXPECT_EQ(files, 4);
+  // The fitted G against the truth of the simulated rig (eq. 11: poles -0.547, -16.56; zero -0.896).
+  const std::regex pole_line(R"(poles: (-[\d.]+), (-[\d.]+))");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.out, m, pole_line)) << r.out;
+  const double p1 = std::stod(m[1]), p2 = std::stod(m[2]);
+  std::cout << "[ident --rig] poles " << p1 << ", " << p2 << "\n";
+  EXPECT_NEAR(std::max(p1, p2), -0.547, 0.547 * 0.25) << "slow pole (short plan, creep not settled)";
+  EXPECT_NEAR(std::min(p1, p2), -16.56, 16.56 * 0.1);
+  // The daemon takes the written [model] as it is.
+  std::string cfg = test::slurp(write_config("ident_model", 17, "ident"));
+  const std::string model_text = test::slurp(model);
+  cfg = std::regex_replace(cfg, std::regex(R"(\[model\][\s\S]*?\n\[controller\])"),
+                           model_text.substr(model_text.find("[model]")) + "io_delay_samples = 1\n\n[controller]");
+  const std::string cfg_path = ::testing::TempDir() + "ident_model_daemon.toml";
+  std::ofstream(cfg_path) << cfg;
+  const auto check = run_program(kDaemon, {"--config", cfg_path, "--check-config"});
+  EXPECT_EQ(check.exit_code, 0) << check.err << check.out;
+  // The rig is left safe: DISABLED, displacement setpoints.
+  tools::DdsClient c(options(17, "ident"));
+  const auto s = c.fresh_status();
+  EXPECT_EQ(s.state, 0);
+  EXPECT_EQ(s.target, 0);
   EXPECT_EQ(daemon.stop().exit_code, 0);
 }

@@ -78,14 +78,15 @@ TEST(IdentCommand, SimulatedRigEndToEndWritesAModelTheParserAccepts) {
   fs::remove_all(dir);
 }
 
-TEST(IdentCommand, RigModeSaysItNeedsDds) {
+TEST(IdentCommand, RigModeWithoutADdsConfigurationSaysWhatToGive) {
   IdentArgs a;
-  a.rig = true;
+  a.rig = "rig1";
+  unsetenv("PVCGEL_DDS_CONFIG");
   try {
     (void)run_ident(a);
     FAIL();
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("not available until the DDS interface exists"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("pass --dds-config FILE or set PVCGEL_DDS_CONFIG"), std::string::npos) << e.what();
   }
   IdentArgs none;
   EXPECT_THROW((void)run_ident(none), std::runtime_error);
