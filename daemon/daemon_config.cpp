@@ -47,10 +47,8 @@ DaemonConfig load_daemon_config(const std::string& path) {
     loop.finish();
 
     auto hal = top.table("hal");
-    cfg.hal_backend = hal.string("backend", cfg.hal_backend);
-    if (cfg.hal_backend != "sim")
-      throw ConfigError(hal.key("backend"), "'" + cfg.hal_backend + "' is not available in this build (only \"sim\"; the modbus/gpio drive is a separate issue)");
-    hal.finish();
+    cfg.hal = parse_hal_config(hal, cfg.realtime.period_s);
+    cfg.hal_backend = cfg.hal.backend;
 
     auto s = top.table("safety");
     auto& sc = cfg.safety;

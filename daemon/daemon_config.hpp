@@ -8,6 +8,7 @@
 #include "control/config_parser.hpp"
 #include "daemon/control_loop.hpp"
 #include "daemon/dds/dds_participant.hpp"
+#include "daemon/hal_config.hpp"
 #include "daemon/realtime_thread.hpp"
 
 namespace pvcgel::daemon {
@@ -18,6 +19,7 @@ struct DaemonConfig {
   RealtimeConfig realtime;
   SafetyConfig safety;
   std::string hal_backend = "sim";
+  HalConfig hal;  ///< `[hal]`: backend, `[hal.modbus]`, `[hal.gpio]`
   std::string trajectory;  ///< empty: idle DISABLED until a setpoint source starts the loop
   double duration_s = std::numeric_limits<double>::infinity();
   std::string config_hash;  ///< FNV-1a 64 of the file's bytes, hex

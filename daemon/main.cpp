@@ -12,6 +12,7 @@
 
 #include "control/config_error.hpp"
 #include "daemon/daemon_config.hpp"
+#include "daemon/hal_factory.hpp"
 #include "daemon/recorder.hpp"
 #include "daemon/dds_bridge.hpp"
 #include "hal/sim_backend.hpp"
@@ -63,7 +64,8 @@ int run(const Options& opt) {
     std::cout << "pvcgeld: configuration " << opt.config << " is valid (hash " << cfg.config_hash << ")\n";
     return kExitOk;
   }
-  hal::Hal& hal = *sim;
+  const auto hal_ptr = make_hal(cfg, std::move(sim), !opt.inject.empty());
+  hal::Hal& hal = *hal_ptr;
 
   ControlLoop loop(hal, controller, trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
   loop.set_auto_start(has_trajectory);
@@ -177,11 +179,12 @@ int run(const Options& opt) {
       last_fault = rec.fault;
     }
     if (now - last_status > std::chrono::seconds(1)) {
-      char status[200];
-      std::snprintf(status, sizeof status, "STATUS=%s%s%s, u %.1f V, y %.2f um, r %.2f um, %llu overruns",
+      char status[320];
+      std::snprintf(status, sizeof status, "STATUS=%s%s%s, u %.1f V, y %.2f um, r %.2f um, %llu overruns, hal %s",
                     to_string(rec.state).data(), rec.fault != FaultReason::none ? " " : "",
                     rec.fault != FaultReason::none ? to_string(rec.fault).data() : "", rec.u_V, rec.y_um, rec.r_um,
-                    static_cast<unsigned long long>(stats->overruns.load(std::memory_order_relaxed)));
+                    static_cast<unsigned long long>(stats->overruns.load(std::memory_order_relaxed)),
+                    health_summary(hal.health()).c_str());
       sd_notify(0, status);
       last_status = now;
     }
@@ -210,7 +213,7 @@ int run(const Options& opt) {
   if (recorder)
     std::fprintf(stderr, "; recorded %llu rows to %s (sequence gaps %llu)", static_cast<unsigned long long>(recorder->rows()),
                  opt.record.c_str(), static_cast<unsigned long long>(recorder->gaps()));
-  std::fprintf(stderr, "\n");
+  std::fprintf(stderr, "; hal %s: %s\n", hal.name().data(), health_summary(hal.health()).c_str());
   return loop.state() == LoopState::fault ? kExitFault : kExitOk;
 }
 

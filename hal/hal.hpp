@@ -31,6 +31,10 @@ constexpr std::string_view to_string(HalStatus s) noexcept {
 /// Counters a backend keeps for status reports (read from non-RT threads).
 struct HalHealth {
   std::uint64_t reads = 0, writes = 0, timeouts = 0, invalid_replies = 0, device_faults = 0;
+  std::uint64_t exceptions = 0;      ///< protocol exception replies (counted in invalid_replies too)
+  std::uint64_t garbage_frames = 0;  ///< malformed replies (counted in invalid_replies too)
+  std::uint64_t reconnects = 0;      ///< links re-established after a loss
+  bool link_up = true;               ///< false while a backend reconnects
   bool high_voltage_enabled = false;
   bool amplifier_fault = false;
 };

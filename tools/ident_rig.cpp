@@ -154,7 +154,7 @@ std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const 
                              {{"rate_hz", rate}, {"hal_backend", c.status().hal_backend}, {"rig_id", rig.rig},
                               {"trajectory", trajectory}, {"mode", "open_loop"}, {"settle_s", settle}});
         std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s recorded\n", i, n, p.amplitude_V,
-                     p.bias_V, p.frequency_Hz, r.t_s.size() * Ts);
+                     p.bias_V, p.frequency_Hz, static_cast<double>(r.t_s.size()) * Ts);
       }
     };
     run_all(plan.points(), dir);

@@ -124,7 +124,12 @@ TEST(DdsE2E, TwoDaemonsOnOneDomainOnlyTheAddressedRigActs) {
 // Every validation rule, over DDS: refused with the right reason and counted,
 // while the loop keeps running.
 TEST(DdsE2E, EveryBadInputIsRejectedWithItsReasonAndTheLoopKeepsRunning) {
-  Process daemon(kDaemon, {"--config", write_config("validate", 13, "val", "\n[setpoints]\nmax_chunk_samples = 256\n")});
+  std::string cfg = test::slurp(write_config("validate", 13, "val"));
+  cfg = std::regex_replace(cfg, std::regex("\nmax_chunk_samples = 1024"), "\nmax_chunk_samples = 256");
+  ASSERT_NE(cfg.find("max_chunk_samples = 256"), std::string::npos);
+  const std::string cfg_path = ::testing::TempDir() + "validate_256.toml";
+  std::ofstream(cfg_path) << cfg;
+  Process daemon(kDaemon, {"--config", cfg_path});
   tools::DdsClient c(options(13, "val"));
   c.connect();
   c.command(daemon::CommandKind::arm);
