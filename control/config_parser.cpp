@@ -13,6 +13,26 @@ HammersteinModel read_model(TableReader& t) {
   return {std::move(f), std::move(G)};
 }
 
+/// `[sim.truth.effect]`: the effect `pvcgel diagnose` writes (name plus its parameters).
+diagnosis::Effect read_effect(TableReader& t, double sample_time_s) {
+  const std::string name = t.string("name", "");
+  const auto kind = diagnosis::parse_effect_kind(name);
+  if (!kind || *kind == diagnosis::EffectKind::none) {
+    std::string known;
+    for (auto k : diagnosis::kCandidateEffects) known += (known.empty() ? "" : ", ") + std::string(diagnosis::to_string(k));
+    throw ConfigError(t.key("name"), "unknown effect '" + name + "' (" + known + ")");
+  }
+  diagnosis::Effect e{*kind, {}};
+  const auto specs = diagnosis::parameter_specs(*kind, sample_time_s, 1e300);
+  for (size_t i = 0; i < specs.size(); ++i) {
+    if (!t.has(specs[i].name)) throw ConfigError(t.key(specs[i].name), "is required for a " + name + " effect");
+    e.p[i] = t.number(specs[i].name, 0.0);
+  }
+  t.finish();
+  diagnosis::validate(e, sample_time_s, t.key("").substr(0, t.key("").size() - 1));
+  return e;
+}
+
 }  // namespace
 
 HammersteinModel parse_model(const toml::table& root, const std::string& source) {
@@ -95,6 +115,8 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     auto truth = s.table("truth");
     if (truth.present()) {
       sc.truth = read_model(truth);
+      auto effect = truth.table("effect");
+      if (effect.present()) sc.added_effect = read_effect(effect, sc.sample_time_s);
       truth.finish();
     }
     auto h = s.table("hysteresis");

@@ -21,12 +21,23 @@ SimulatedRig::SimulatedRig(const SimRigConfig& c) : cfg_(c), rng_(c.seed) {
   const TransferFunction creep({c.creep.fraction * c.truth.G.dc_gain()}, {c.creep.time_constant_s, 1.0});
   creep_ = LtiFilter(discretize_zoh(realize(creep), c.sample_time_s));
   if (const auto turn = c.truth.f.first_turnover(1000.0)) x_sat_ = *turn;
+  if (c.added_effect.kind != diagnosis::EffectKind::none) {
+    if (c.hysteresis.enabled || c.creep.enabled)
+      throw ConfigError("sim.truth.effect", "a diagnosed effect replaces the rig's built-in effects: set [sim.hysteresis] "
+                                            "and [sim.creep] enabled = false");
+    augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, c.added_effect);
+  }
   reset_steady_state(0.0);
 }
 
 double SimulatedRig::static_output(double x) const noexcept { return cfg_.truth.f(std::min(x, x_sat_)); }
 
 void SimulatedRig::reset_steady_state(double u) noexcept {
+  if (augmented_) {
+    augmented_->reset_steady_state(u);
+    y_true_ = augmented_->output();
+    return;
+  }
   delay_line_.fill(u);
   u_prev_ = u;
   h_ = 0.0;
@@ -44,6 +55,11 @@ double SimulatedRig::measure() noexcept {
 }
 
 void SimulatedRig::apply(double u) noexcept {
+  if (augmented_) {
+    augmented_->apply(u);
+    y_true_ = augmented_->output();
+    return;
+  }
   // The amplifier output during this sample is the command from io_delay samples ago.
   const int d = cfg_.io_delay_samples;
   delay_line_[static_cast<size_t>(delay_head_)] = u;

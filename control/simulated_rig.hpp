@@ -5,8 +5,10 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <random>
 
+#include "control/diagnosis/effect.hpp"
 #include "control/hammerstein_model.hpp"
 #include "control/lti_filter.hpp"
 
@@ -42,6 +44,11 @@ struct SimRigConfig {
     double time_constant_s = 20.0;
   } creep;
 
+  /// An effect diagnosed by `pvcgel diagnose` (`[sim.truth.effect]`): the
+  /// truth then runs as diagnosis::AugmentedPlant (model plus this effect)
+  /// and the built-in hysteresis and creep must be off.
+  diagnosis::Effect added_effect{};
+
   /// This rig with `truth` as its plant and every effect beyond the Hammerstein
   /// model switched off (no hysteresis, creep, noise or quantisation; the I/O
   /// delay and sample time stay): a rig that is exactly a model.
@@ -49,6 +56,7 @@ struct SimRigConfig {
     SimRigConfig c = *this;
     c.truth = model;
     c.hysteresis.enabled = c.creep.enabled = false;
+    c.added_effect = {};
     c.noise_sigma_um = c.quantization_um = 0.0;
     return c;
   }
@@ -87,6 +95,7 @@ class SimulatedRig final {
   double x_sat_ = 1000.0;
   double u_prev_ = 0.0, h_ = 0.0;
   double y_true_ = 0.0;
+  std::optional<diagnosis::AugmentedPlant> augmented_;
   std::mt19937_64 rng_;
   std::normal_distribution<double> noise_{0.0, 1.0};
 };

@@ -1,4 +1,5 @@
 #include "tools/bench_command.hpp"
+#include "tools/diagnose_suite.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -172,6 +173,24 @@ void run_paper(const PaperArgs& a) {
   if (!a.plot_dir.empty()) plot_references(r, o, a.plot_dir);
 }
 
+/// `pvcgel bench diagnose`: the full blind suite of issue 7.
+void add_diagnose_bench(CLI::App& bench) {
+  struct Args {
+    int cases = 44;
+    std::uint64_t seed = 7;
+    std::string save;
+  };
+  auto args = std::make_shared<Args>();
+  auto* cmd = bench.add_subcommand("diagnose", "Blind suite for pvcgel diagnose: concealed effects, confusion matrix, accuracy");
+  cmd->add_option("--cases", args->cases, "number of cases (every effect and none, evenly)")->capture_default_str()->check(CLI::Range(11, 10000));
+  cmd->add_option("--seed", args->seed, "suite seed")->capture_default_str();
+  cmd->add_option("--save", args->save, "also write the cases as recordings to DIR (labels apart, in labels.csv)");
+  cmd->callback([args] {
+    const auto r = run_blind_suite(args->cases, args->seed, std::cout, {}, args->save);
+    std::cout << format_suite(r);
+  });
+}
+
 }  // namespace
 
 void add_bench_command(CLI::App& app) {
@@ -193,6 +212,7 @@ void add_bench_command(CLI::App& app) {
   paper->add_option("--plot", args->plot_dir, "write PNG plots (like the paper's Figs. 11-13) to DIR");
   paper->add_flag("--sweep", args->sweep, "sweep the crossover target instead (plots go to --plot DIR)");
   paper->add_option("--sweep-values", args->sweep_values, "crossover values for --sweep (rad/s)");
+  add_diagnose_bench(*bench);
   paper->callback([args, paper] {
     args->crossover_given = paper->count("--crossover") > 0;
     args->phase_margin_given = paper->count("--phase-margin") > 0;

@@ -5,6 +5,7 @@
 #include "control/config_error.hpp"
 #include "tools/bench_command.hpp"
 #include "tools/client_commands.hpp"
+#include "tools/diagnose_command.hpp"
 #include "tools/ident_command.hpp"
 #include "tools/record_command.hpp"
 #include "tools/show_command.hpp"
@@ -17,6 +18,7 @@ int main(int argc, char** argv) {
   pvcgel::tools::add_record_command(app);
   pvcgel::tools::add_ident_command(app);
   pvcgel::tools::add_client_commands(app);
+  pvcgel::tools::add_diagnose_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

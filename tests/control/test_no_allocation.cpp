@@ -78,6 +78,31 @@ TEST_P(NoAllocation, ControllerStepRigAndModeSwitchesDoNotAllocate) {
   EXPECT_TRUE(std::isfinite(checksum));
 }
 
+TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
+  // Every effect `pvcgel diagnose` can write into [sim.truth.effect].
+  const std::vector<diagnosis::Effect> effects{
+      {diagnosis::EffectKind::hysteresis, {0.02, 20.0}},  {diagnosis::EffectKind::creep, {0.01, 3.0}},
+      {diagnosis::EffectKind::dead_zone, {20.0, 30.0}},   {diagnosis::EffectKind::saturation, {100.0, 500.0}},
+      {diagnosis::EffectKind::delay, {2.5e-3}},           {diagnosis::EffectKind::asymmetric_dynamics, {0.3}},
+      {diagnosis::EffectKind::slew_limit, {2000.0}},      {diagnosis::EffectKind::resonance, {20.0, 0.1}},
+      {diagnosis::EffectKind::drift, {0.1, 0.01, 1.0}},   {diagnosis::EffectKind::bias_dependent_dynamics, {0.3, 0.5}}};
+  for (const auto& e : effects) {
+    SimRigConfig c = SimRigConfig{}.exactly(paper_model(3));
+    c.noise_sigma_um = 0.05;
+    c.added_effect = e;
+    SimulatedRig rig(c);  // design time: may allocate
+    double checksum = 0.0;
+    const long before = g_allocations.load();
+    rig.reset_steady_state(300.0);
+    for (long k = 0; k < 3000; ++k) {
+      checksum += rig.measure();
+      rig.apply(300.0 + 100.0 * std::sin(0.01 * static_cast<double>(k)));
+    }
+    EXPECT_EQ(g_allocations.load() - before, 0) << diagnosis::to_string(e.kind);
+    EXPECT_TRUE(std::isfinite(checksum));
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(AllModes, NoAllocation, ::testing::ValuesIn(kAllModes),
                          [](const auto& param_info) { return std::string(to_string(param_info.param)); });
 

@@ -1,0 +1,109 @@
+#pragma once
+/// @file
+/// Sim-to-real mismatch diagnosis: simulate the nominal model from the recorded
+/// voltage (output error), locate where and in which regime the residual
+/// exceeds the noise, fit candidate effects and choose by held-out error.
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "control/diagnosis/effect.hpp"
+#include "control/hammerstein_model.hpp"
+
+namespace pvcgel::control::diagnosis {
+
+/// One recording, whatever it came from: y[k] measured at t[k], then u[k]
+/// applied and held until t[k+1]. Uniform sampling.
+struct Series {
+  std::vector<double> t_s, u_V, y_um;
+  double sample_time_s = 1e-3;
+};
+
+/// Tuning of the decision rules (defaults are what `pvcgel diagnose` uses).
+struct DiagnosisOptions {
+  int io_delay_samples = 1;           ///< the model's I/O delay (samples), as `[model] io_delay_samples`
+  double validation_fraction = 0.3;   ///< share of every block held out (its end)
+  double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block (the whole
+                                      ///< recording as one block when shorter than two blocks)
+  double window_s = 1.0;              ///< localisation window
+  double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
+  double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
+  double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per fitted parameter
+  double tie_margin = 0.03;           ///< validation scores this close are a tie, broken by the fit segment
+  double explained_excess = 0.3;      ///< the chosen effect must leave at most this share of the excess MSE
+  int candidates_to_fit = 10;          ///< the leading candidates (by evidence) that are fitted fully
+};
+
+/// A stretch of a recording where the residual exceeds the noise.
+struct MismatchWindow {
+  int recording = 0;
+  double t_start_s = 0.0, t_end_s = 0.0;
+  std::string regime;  ///< voltage level, amplitude, direction, frequency
+  double rms_um = 0.0;
+};
+
+/// Errors of one model over the fit and validation segments.
+struct ModelErrors {
+  double rmse_um = 0.0;             ///< all samples
+  double rmse_fit_um = 0.0;         ///< fit segments
+  double rmse_validation_um = 0.0;  ///< held-out segments
+};
+
+/// One fitted candidate.
+struct CandidateResult {
+  Effect effect;
+  std::vector<ParameterSpec> specs;
+  double evidence_r2 = 0.0;  ///< share of the fit-segment residual variance its best coarse-grid member explains
+  bool fitted = false;       ///< refined by least squares (the leading candidates only)
+  ModelErrors errors;
+  double score = 0.0;        ///< penalised validation MSE (lower is better)
+  int simulations = 0;
+  std::string explanation;
+};
+
+/// The outcome.
+struct DiagnosisResult {
+  std::string verdict;  ///< an effect name, "none" or "unexplained"
+  EffectKind chosen = EffectKind::none;  ///< effect of the augmented model (none for "none"/"unexplained")
+  Effect effect;        ///< the chosen effect with its fitted parameters
+  std::string explanation;
+  double noise_sigma_um = 0.0;
+  ModelErrors baseline, fitted;  ///< fitted == baseline unless an effect was chosen
+  std::vector<CandidateResult> candidates;  ///< ranked best first (fitted ones by score, then the rest by evidence)
+  std::vector<MismatchWindow> mismatch;
+  std::vector<std::vector<double>> y_baseline_um, y_fitted_um;  ///< per recording
+  std::vector<std::vector<char>> held_out;  ///< per recording and sample: 1 when held out (validation)
+  std::vector<double> window_centre_s, window_rms_um;  ///< all windows of all recordings (for plots)
+  std::vector<int> window_recording;
+  int simulations = 0;
+};
+
+/// Which samples of an n-sample recording are held out (1) rather than fitted (0).
+std::vector<char> held_out_mask(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
+
+/// Sensor-noise standard deviation from the data: robust (median) scale of
+/// the second differences of y, which the slow actuator dynamics leave to the noise.
+double estimate_noise_sigma(const std::vector<double>& y_um);
+
+/// A readable label of the regime of u over [begin, end).
+std::string describe_regime(const Series& s, size_t begin, size_t end);
+
+/// Checks a series: uniform, monotone time, finite values, long enough for G's
+/// slowest time constant. @throws std::invalid_argument naming the sample and reason.
+void check_series(const Series& s, const HammersteinModel& model);
+
+/// Simulates `model` (with `effect`) from each recording's u, output error,
+/// from rest at the voltage whose steady state matches the mean of the first
+/// 10 measured samples (the recording's initial state; for an open-loop
+/// recording that starts at rest this is u[0]).
+std::vector<std::vector<double>> simulate(const HammersteinModel& model, const Effect& effect,
+                                          const std::vector<Series>& data, int io_delay_samples);
+
+/// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),
+/// ConfigError on a model that cannot be simulated (unstable G, non-monotone f
+/// over the recorded voltage range).
+DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data,
+                         const DiagnosisOptions& options = {});
+
+}  // namespace pvcgel::control::diagnosis

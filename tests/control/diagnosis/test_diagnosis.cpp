@@ -1,0 +1,145 @@
+#include "control/diagnosis/diagnosis.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+#include "control/config_error.hpp"
+
+namespace pvcgel::control::diagnosis {
+namespace {
+
+constexpr double Ts = 1e-3;
+
+/// A 20 s multisine recording of `model` with `effect`, white noise sigma.
+Series recording(const Effect& effect, double sigma, std::uint64_t seed = 3, double seconds = 20.0) {
+  Series s;
+  s.sample_time_s = Ts;
+  const auto n = static_cast<size_t>(seconds / Ts);
+  for (size_t k = 0; k < n; ++k) {
+    const double t = static_cast<double>(k) * Ts;
+    s.t_s.push_back(t);
+    s.u_V.push_back(350.0 + 120.0 * std::sin(2 * M_PI * 0.3 * t) + 60.0 * std::sin(2 * M_PI * 1.7 * t + 1.0) +
+                    30.0 * std::sin(2 * M_PI * 4.1 * t + 2.0));
+  }
+  AugmentedPlant p(paper_model(3), 1, Ts, effect);
+  s.y_um = p.simulate(s.u_V, s.u_V[0]);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> N(0.0, sigma);
+  for (double& y : s.y_um) y += N(rng);
+  return s;
+}
+
+TEST(NoiseEstimate, RecoversWhiteNoiseUnderASlowSignal) {
+  const auto s = recording({}, 0.05);
+  EXPECT_NEAR(estimate_noise_sigma(s.y_um), 0.05, 0.05 * 0.05);
+}
+
+TEST(Diagnose, NominalDataWithNoiseIsNone) {
+  const auto r = diagnose(paper_model(3), {recording({}, 0.05)});
+  EXPECT_EQ(r.verdict, "none");
+  EXPECT_TRUE(r.mismatch.empty());
+  EXPECT_NEAR(r.baseline.rmse_um, 0.05, 0.005);
+}
+
+TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
+  // Same form as the candidate (a fitter check, not the blind proof): the fit must find it.
+  const Effect truth{EffectKind::creep, {0.004, 2.5}};
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05)});
+  ASSERT_EQ(r.verdict, "creep") << r.explanation;
+  EXPECT_NEAR(r.effect.p[0], 0.004, 0.0004);
+  EXPECT_NEAR(r.effect.p[1], 2.5, 0.5);
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
+  ASSERT_FALSE(r.mismatch.empty());
+}
+
+TEST(Diagnose, FitsOneEffectAcrossSeveralRecordings) {
+  const Effect truth{EffectKind::hysteresis, {0.03, 15.0}};
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05, 4, 12.0), recording(truth, 0.05, 5, 20.0)});
+  ASSERT_EQ(r.verdict, "hysteresis") << r.explanation;
+  ASSERT_EQ(r.y_fitted_um.size(), 2u);
+  EXPECT_EQ(r.y_fitted_um[0].size(), 12000u);
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.06);
+  EXPECT_NEAR(r.effect.p[0], 0.03, 0.006);
+  EXPECT_NEAR(r.effect.p[1], 15.0, 3.0);
+}
+
+TEST(Diagnose, RecoversAWholeSampleDelay) {
+  const auto r = diagnose(paper_model(3), {recording({EffectKind::delay, {2 * Ts}}, 0.05)});
+  ASSERT_EQ(r.verdict, "delay") << r.explanation;
+  EXPECT_NEAR(r.effect.p[0], 2 * Ts, 0.2 * Ts);
+}
+
+TEST(Diagnose, AMismatchNoCandidateExplainsIsUnexplained) {
+  // A random telegraph offset of +-0.4 um switching every ~0.5 s, unrelated to u.
+  auto s = recording({}, 0.05);
+  std::mt19937_64 rng(11);
+  std::bernoulli_distribution flip(Ts / 0.5);
+  double level = 0.4;
+  for (double& y : s.y_um) {
+    if (flip(rng)) level = -level;
+    y += level;
+  }
+  const auto r = diagnose(paper_model(3), {s});
+  EXPECT_EQ(r.verdict, "unexplained") << r.explanation;
+  EXPECT_EQ(r.chosen, EffectKind::none);
+  EXPECT_FALSE(r.mismatch.empty());
+}
+
+TEST(Diagnose, LocatesAMismatchOnlyWhereItIs) {
+  // Drift that starts at 12 s: the windows before must be clean.
+  const auto r = diagnose(paper_model(3), {recording({EffectKind::drift, {0.0, 0.1, 12.0}}, 0.05)});
+  ASSERT_FALSE(r.mismatch.empty());
+  EXPECT_GE(r.mismatch.front().t_start_s, 12.0);
+  EXPECT_EQ(r.verdict, "drift") << r.explanation;
+}
+
+TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
+  const auto model = paper_model(3);
+  auto s = recording({}, 0.05, 1, 10.0);
+  auto bad = s;
+  bad.t_s[100] += 0.5 * Ts;
+  try {
+    check_series(bad, model);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "sample 100: non-uniform sampling (step 0.0015 s, expected 0.001 s)");
+  }
+  bad = s;
+  bad.t_s[50] = bad.t_s[49];
+  EXPECT_THROW(check_series(bad, model), std::invalid_argument);
+  bad = s;
+  bad.u_V[7] = NAN;
+  try {
+    check_series(bad, model);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "sample 7: non-finite t_s, u_V or y_um");
+  }
+  auto shortest = recording({}, 0.05, 1, 5.0);
+  try {
+    check_series(shortest, model);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(),
+                 "recording lasts 5 s, shorter than 3 time constants of G's slowest pole (5.68 s): the output-error "
+                 "simulation cannot be judged");
+  }
+}
+
+TEST(Diagnose, NonMonotonePolynomialOverTheRecordedRangeIsAConfigError) {
+  // n = 3 turns over at ~862 V.
+  auto s = recording({}, 0.05);
+  for (double& u : s.u_V) u *= 2.2;
+  try {
+    (void)diagnose(paper_model(3), {s});
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "model.poly");
+  }
+}
+
+}  // namespace
+}  // namespace pvcgel::control::diagnosis

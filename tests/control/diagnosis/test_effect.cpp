@@ -1,0 +1,172 @@
+#include "control/diagnosis/effect.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "control/config_error.hpp"
+#include "control/simulated_rig.hpp"
+
+namespace pvcgel::control::diagnosis {
+namespace {
+
+constexpr double Ts = 1e-3;
+
+std::vector<double> voltage(size_t n) {
+  std::vector<double> u(n);
+  for (size_t k = 0; k < n; ++k)
+    u[k] = 300.0 + 150.0 * std::sin(0.003 * static_cast<double>(k)) + 20.0 * std::sin(0.05 * static_cast<double>(k));
+  return u;
+}
+
+std::vector<double> run(const Effect& e, const std::vector<double>& u, double initial_V) {
+  AugmentedPlant p(paper_model(3), 1, Ts, e);
+  return p.simulate(u, initial_V);
+}
+
+std::vector<double> steps(size_t n, double from, double to) {
+  std::vector<double> u(n, to);
+  u[0] = from;
+  return u;
+}
+
+TEST(AugmentedPlant, NominalIsExactlyTheSimulatedRigWithoutSensorEffects) {
+  const SimRigConfig c = SimRigConfig{}.exactly(paper_model(3));
+  SimulatedRig rig(c);
+  const auto u = voltage(5000);
+  rig.reset_steady_state(u[0]);
+  const auto y = run({}, u, u[0]);
+  for (size_t k = 0; k < u.size(); ++k) {
+    ASSERT_NEAR(y[k], rig.true_displacement_um(), 1e-9) << "k=" << k;
+    rig.apply(u[k]);
+  }
+}
+
+TEST(AugmentedPlant, HysteresisMakesTheFallingBranchHigherThanTheRisingOne) {
+  // Slow triangle 100 -> 500 -> 100 V: compare y at 300 V on the way up and down.
+  std::vector<double> u;
+  for (int k = 0; k <= 40000; ++k) u.push_back(100.0 + 400.0 * (k <= 20000 ? k : 40000 - k) / 20000.0);
+  const auto y0 = run({}, u, u[0]);
+  const auto y = run({EffectKind::hysteresis, {0.05, 20.0}}, u, u[0]);
+  const double up = y[10000] - y0[10000], down = y[30000] - y0[30000];
+  EXPECT_LT(up, -0.1);   // the effective voltage lags below u while rising
+  EXPECT_GT(down, 0.1);  // and above it while falling
+  const auto none = run({EffectKind::hysteresis, {0.0, 20.0}}, u, u[0]);
+  EXPECT_NEAR(none[30000], y0[30000], 1e-12);
+}
+
+TEST(AugmentedPlant, CreepAddsASlowFirstOrderBranch) {
+  const double tau = 5.0, fraction = 0.02;
+  const auto u = steps(60000, 200.0, 400.0);
+  const auto y0 = run({}, u, 200.0);
+  const auto y = run({EffectKind::creep, {fraction, tau}}, u, 200.0);
+  const auto model = paper_model(3);
+  const double g0 = model.G.dc_gain();
+  EXPECT_NEAR(y[0] - y0[0], fraction * g0 * model.f(200.0), 1e-9);  // at rest, the branch is charged
+  EXPECT_NEAR(y.back() - y0.back(), fraction * g0 * model.f(400.0), 1e-3);
+  // After one tau, 1 - e^-1 of the branch's step is done.
+  const double step = fraction * g0 * (model.f(400.0) - model.f(200.0));
+  const double done = (y[5000] - y0[5000] - fraction * g0 * model.f(200.0)) / step;
+  EXPECT_NEAR(done, 1.0 - std::exp(-1.0), 0.02);
+}
+
+TEST(AugmentedPlant, DeadZoneHasNoResponseBelowTheThresholdAndNominalAboveTwice) {
+  const Effect e{EffectKind::dead_zone, {30.0, 30.0}};
+  EXPECT_NEAR(run(e, steps(20000, 0.0, 25.0), 0.0).back(), 0.0, 1e-12);
+  EXPECT_NEAR(run(e, steps(20000, 0.0, 80.0), 0.0).back(), run({}, steps(20000, 0.0, 80.0), 0.0).back(), 1e-6);
+  EXPECT_LT(run(e, steps(20000, 0.0, 45.0), 0.0).back(), run({}, steps(20000, 0.0, 45.0), 0.0).back());
+}
+
+TEST(AugmentedPlant, SaturationSoftensAboveTheKnee) {
+  const Effect e{EffectKind::saturation, {100.0, 200.0}};
+  const auto u = steps(30000, 0.0, 600.0);
+  const double nominal = run({}, u, 0.0).back();
+  ASSERT_GT(nominal, 100.0);
+  const double excess = nominal - 100.0;
+  EXPECT_NEAR(run(e, u, 0.0).back(), 100.0 + excess / std::sqrt(1.0 + (excess / 200.0) * (excess / 200.0)), 1e-6);
+  EXPECT_NEAR(run(e, steps(30000, 0.0, 150.0), 0.0).back(), run({}, steps(30000, 0.0, 150.0), 0.0).back(), 1e-9);
+}
+
+TEST(AugmentedPlant, WholeSampleDelayShiftsTheOutput) {
+  const auto u = voltage(3000);
+  const auto y0 = run({}, u, u[0]);
+  const auto y = run({EffectKind::delay, {3 * Ts}}, u, u[0]);
+  for (size_t k = 10; k < u.size(); ++k) ASSERT_NEAR(y[k], y0[k - 3], 1e-6) << k;
+}
+
+TEST(AugmentedPlant, AsymmetricDynamicsSlowsTheRelaxation) {
+  const auto up = steps(20000, 100.0, 400.0), down = steps(20000, 400.0, 100.0);
+  const Effect e{EffectKind::asymmetric_dynamics, {1.0}};
+  // Rising: nominal. Falling: twice as slow (time scale 1 + kappa).
+  const auto y_up = run(e, up, 100.0), y0_up = run({}, up, 100.0);
+  EXPECT_NEAR(y_up[3000], y0_up[3000], 1e-9);
+  const auto y_dn = run(e, down, 400.0), y0_dn = run({}, down, 400.0);
+  EXPECT_GT(y_dn[1000], y0_dn[1000] + 1.0);
+  EXPECT_NEAR(y_dn[2000], y0_dn[1000], 0.05 * (y0_dn[0] - y0_dn[1000]));
+}
+
+TEST(AugmentedPlant, SlewLimitRampsTheVoltage) {
+  const Effect e{EffectKind::slew_limit, {1000.0}};
+  const auto y = run(e, steps(3000, 200.0, 300.5), 200.0);
+  // The same as the nominal model driven by the sample means of a 1 V/sample
+  // ramp: 200.5, 201.5, ..., 299.5, then 300.375 (0.5 V reached in half a sample).
+  std::vector<double> ramp(3000, 300.5);
+  ramp[0] = 200.0;
+  for (size_t k = 1; k <= 100; ++k) ramp[k] = 199.5 + static_cast<double>(k);
+  ramp[101] = 300.5 - 0.5 * 0.5 * 0.5;
+  const auto y_ramp = run({}, ramp, 200.0);
+  for (size_t k = 0; k < y.size(); ++k) ASSERT_NEAR(y[k], y_ramp[k], 1e-9) << k;
+}
+
+TEST(AugmentedPlant, ResonanceKeepsTheGainAndRingsAtItsFrequency) {
+  const Effect e{EffectKind::resonance, {5.0, 0.05}};
+  const auto u = steps(20000, 100.0, 300.0);
+  const auto y = run(e, u, 100.0), y0 = run({}, u, 100.0);
+  EXPECT_NEAR(y.back(), y0.back(), 1e-6);
+  double diff_max = 0.0;
+  for (size_t k = 0; k < y.size(); ++k) diff_max = std::max(diff_max, std::abs(y[k] - y0[k]));
+  EXPECT_GT(diff_max, 0.5);
+}
+
+TEST(AugmentedPlant, DriftIsAnInputIndependentRampAfterItsOnset) {
+  const Effect e{EffectKind::drift, {0.2, 0.05, 1.0}};
+  const auto u = voltage(4000);
+  const auto y = run(e, u, u[0]), y0 = run({}, u, u[0]);
+  for (size_t k = 0; k < u.size(); ++k) {
+    const double t = static_cast<double>(k) * Ts;
+    ASSERT_NEAR(y[k] - y0[k], 0.2 + 0.05 * std::max(t - 1.0, 0.0), 1e-9) << k;
+  }
+}
+
+TEST(AugmentedPlant, BiasDependentDynamicsAreSlowerAtHigherDisplacement) {
+  const Effect e{EffectKind::bias_dependent_dynamics, {1.0}};
+  const auto u = steps(60000, 0.0, 500.0);
+  const auto y = run(e, u, 0.0), y0 = run({}, u, 0.0);
+  EXPECT_NEAR(y.back(), y0.back(), 1e-3);  // same static gain (after ~15 slowed time constants)
+  EXPECT_LT(y[500], y0[500] - 1.0);        // slower on the way up
+}
+
+TEST(AugmentedPlant, RestVoltageInvertsTheSteadyState) {
+  AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::creep, {0.01, 3.0}});
+  p.reset_steady_state(321.0);
+  const double y = p.output();
+  EXPECT_NEAR(p.rest_voltage(y, 0.0, 800.0), 321.0, 1e-6);
+}
+
+TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
+  try {
+    AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::dead_zone, {-3.0, 10.0}});
+    FAIL() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "effect.threshold_V");
+  }
+}
+
+TEST(Effect, NamesRoundTrip) {
+  for (auto k : kCandidateEffects) EXPECT_EQ(parse_effect_kind(to_string(k)), k);
+  EXPECT_FALSE(parse_effect_kind("gravity"));
+}
+
+}  // namespace
+}  // namespace pvcgel::control::diagnosis

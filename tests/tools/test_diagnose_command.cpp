@@ -1,0 +1,183 @@
+#include "tools/diagnose_command.hpp"
+
+#include <gtest/gtest.h>
+#include <toml++/toml.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "control/config_parser.hpp"
+#include "control/diagnosis/generator.hpp"
+#include "control/simulated_rig.hpp"
+#include "daemon/daemon_config.hpp"
+#include "tools/diagnose_suite.hpp"
+#include "tools/recording.hpp"
+
+namespace pvcgel::tools {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace control::diagnosis;
+
+fs::path temp_dir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / ("pvcgel_diagnose_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+void write(const fs::path& p, const std::string& s) { std::ofstream(p) << s; }
+
+std::string read(const fs::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+/// A recording in the daemon's format (with extra columns the tool ignores).
+void write_recording(const fs::path& p, const Series& s, long nan_rows_at_end = 0) {
+  std::ofstream f(p);
+  f << "# pvcgel-recording: 1\n# source: test\nt_s,u_V,y_um,r_um,mode\n";
+  char line[160];
+  for (size_t k = 0; k < s.t_s.size(); ++k) {
+    std::snprintf(line, sizeof line, "%.4f,%.6f,%.5f,nan,open_loop\n", s.t_s[k], s.u_V[k], s.y_um[k]);
+    f << line;
+  }
+  for (long i = 0; i < nan_rows_at_end; ++i)
+    f << s.t_s.back() + static_cast<double>(i + 1) * s.sample_time_s << ",nan,nan,nan,open_loop\n";
+}
+
+const char* kModelN3 = "[model]\npoly = [0.0721, 2.1307e-5, -1.7231e-11]\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n";
+
+TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
+  const auto dir = temp_dir("e2e");
+  const auto c = generate_case(control::paper_model(3), EffectKind::creep, 5);
+  write_recording(dir / "rec.csv", c.recordings[0], 3);
+  write(dir / "model.toml", kModelN3);
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.json = (dir / "report.json").string();
+  a.predict = (dir / "pred").string();
+  a.quiet = true;
+  const auto o = run_diagnose(a);
+  EXPECT_EQ(o.result.verdict, "creep") << o.summary;
+  EXPECT_NE(o.summary.find("3 rows with non-finite t_s/u_V/y_um skipped"), std::string::npos) << o.summary;
+
+  const auto json = read(a.json);
+  for (const char* key : {"\"verdict\": \"creep\"", "\"effects\": [", "\"params\": {\"fraction\": ", "\"baseline\": {\"rmse_um\": ",
+                          "\"fitted\": {\"rmse_um\": ", "\"mismatch\": [", "\"rmse_validation_um\": ", "\"skipped_rows\": 3"})
+    EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
+
+  std::ifstream pf(a.predict + "0.csv");
+  std::string header;
+  std::getline(pf, header);
+  EXPECT_EQ(header, "t_s,y_um_baseline,y_um_fitted");
+
+  // The augmented model: a daemon configuration whose sim rig reproduces the fitted prediction.
+  ASSERT_EQ(o.augmented_model_path, (dir / "predaugmented_model.toml").string());
+  const auto cfg = daemon::load_daemon_config(o.augmented_model_path);
+  ASSERT_EQ(cfg.rig.sim.added_effect.kind, EffectKind::creep);
+  for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(cfg.rig.sim.added_effect.p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
+  auto sim = cfg.rig.sim;
+  sim.noise_sigma_um = sim.quantization_um = 0.0;
+  control::SimulatedRig rig(sim);
+  const auto& s = c.recordings[0];
+  AugmentedPlant plant(control::paper_model(3), 1, s.sample_time_s, o.result.effect);
+  const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
+  rig.reset_steady_state(s.u_V[0]);
+  double worst_rig = 0.0, worst_prediction = 0.0;
+  for (size_t k = 0; k < s.u_V.size(); ++k) {
+    worst_rig = std::max(worst_rig, std::abs(rig.true_displacement_um() - y_model[k]));
+    // The diagnosis starts from the rest state the first samples imply: equal after its transient.
+    if (s.t_s[k] > 10.0) worst_prediction = std::max(worst_prediction, std::abs(y_model[k] - o.result.y_fitted_um[0][k]));
+    rig.apply(s.u_V[k]);
+  }
+  EXPECT_LT(worst_rig, 1e-5) << "the sim rig must run the diagnosed model (parameters written with 8 digits)";
+  EXPECT_LT(worst_prediction, 0.03);
+}
+
+TEST(DiagnoseCommand, ReportHasMarkdownAndPlots) {
+  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) GTEST_SKIP() << "gnuplot not installed";
+  const auto dir = temp_dir("report");
+  const auto c = generate_case(control::paper_model(3), EffectKind::drift, 3);
+  write_recording(dir / "rec.csv", c.recordings[0]);
+  write(dir / "model.toml", kModelN3);
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.report = (dir / "report").string();
+  a.quiet = true;
+  const auto o = run_diagnose(a);
+  for (const char* f : {"report.md", "measured_vs_simulated.png", "residual.png", "residual_vs_regime.png", "validation.png",
+                        "augmented_model.toml"})
+    EXPECT_TRUE(fs::exists(dir / "report" / f)) << f;
+  EXPECT_NE(read(dir / "report" / "report.md").find("**Verdict: " + o.result.verdict + "**"), std::string::npos);
+}
+
+std::string error_of(const std::string& model_text, const std::string& recording_text) {
+  const auto dir = temp_dir("bad");
+  write(dir / "model.toml", model_text);
+  write(dir / "rec.csv", recording_text);
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.quiet = true;
+  try {
+    (void)run_diagnose(a);
+  } catch (const std::exception& e) {
+    std::string m = e.what();
+    // Paths differ per run: report them relative to the directory.
+    for (std::string p = dir.string() + "/"; m.find(p) != std::string::npos;) m.erase(m.find(p), p.size());
+    return m;
+  }
+  return "no error";
+}
+
+std::string uniform_recording(size_t n, double Ts = 1e-3) {
+  std::string s = "t_s,u_V,y_um\n";
+  for (size_t k = 0; k < n; ++k) s += std::to_string(static_cast<double>(k) * Ts) + ",100,8.5\n";
+  return s;
+}
+
+TEST(DiagnoseCommand, BadInputNamesFileLineAndReason) {
+  EXPECT_EQ(error_of(kModelN3, "t_s,u_V\n0,1\n0.001,1\n"), "rec.csv:1: header lacks column 'y_um' (need at least t_s,u_V,y_um)");
+  EXPECT_EQ(error_of(kModelN3, "t_s,u_V,y_um\n0,1,1\n0.001,1,1\n0.003,1,1\n0.004,1,1\n"),
+            "rec.csv:3: non-uniform or non-monotone time (step 0.001000 s, expected 0.001333 s)");
+  EXPECT_EQ(error_of(kModelN3, "t_s,u_V,y_um\n0,1,1\n0.001,1,1\n0.0005,1,1\n"), "rec.csv:3: non-uniform or non-monotone time (step 0.001000 s, expected 0.000250 s)");
+  EXPECT_EQ(error_of(kModelN3, uniform_recording(2000)),
+            "rec.csv: recording lasts 2 s, shorter than 3 time constants of G's slowest pole (5.68 s): the output-error "
+            "simulation cannot be judged");
+  // A NaN row inside a recording breaks the uniform time base once skipped.
+  std::string nan_inside = "t_s,u_V,y_um\n0,1,1\n0.001,nan,1\n0.002,1,1\n0.003,1,1\n";
+  EXPECT_EQ(error_of(kModelN3, nan_inside),
+            "rec.csv:4: non-uniform or non-monotone time (step 0.002000 s, expected 0.001500 s) after skipping 1 invalid rows");
+  EXPECT_EQ(error_of("[model]\npoly = [0.1]\nG_num = [1.0]\nG_den = [1.0, -2.0]\n", uniform_recording(10000)),
+            "model.toml:4: model.G_den: G(s) = (1) / (s - 2) is unstable (a pole in the closed right half plane): an "
+            "output-error simulation of it diverges");
+  EXPECT_EQ(error_of("[model]\npoly = [0.1, -0.001]\nG_num = [1.0]\nG_den = [1.0, 2.0]\n", uniform_recording(10000)),
+            "model.toml:2: model.poly: f is not monotone: f'(x) reaches 0 at x = 5.8 V, inside the recorded voltage range "
+            "(|u| up to 100.0 V)");
+  EXPECT_EQ(error_of("[model]\npoly = [0.1]\nG_num = [1.0]\n", uniform_recording(10000)),
+            "model.toml: model.G_den: is required (in model.toml)");
+}
+
+TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
+  // 11 cases: every effect once and none once (seed fixed); the full suite is `pvcgel bench diagnose`.
+  std::ostringstream log;
+  const auto r = run_blind_suite(11, 7, log);
+  std::cout << log.str() << format_suite(r);
+  EXPECT_EQ(r.cases, 11);
+  EXPECT_GE(r.accuracy(), 0.9);
+  EXPECT_LE(r.false_alarms, 1);
+  EXPECT_LE(r.worst_ratio, 0.5);
+  EXPECT_EQ(r.out_of_spec, 0);
+}
+
+}  // namespace
+}  // namespace pvcgel::tools

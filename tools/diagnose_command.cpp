@@ -1,0 +1,414 @@
+#include "tools/diagnose_command.hpp"
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "control/config_error.hpp"
+#include "control/config_parser.hpp"
+#include "tools/gnuplot.hpp"
+#include "tools/recording.hpp"
+
+namespace pvcgel::tools {
+
+namespace fs = std::filesystem;
+using namespace control::diagnosis;
+
+namespace {
+
+std::string num(double v, const char* f = "%.6g") {
+  if (!std::isfinite(v)) return "null";
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+std::string quoted(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\', o += c;
+    else if (c == '\n') o += "\\n";
+    else if (static_cast<unsigned char>(c) < 0x20) o += ' ';
+    else o += c;
+  }
+  return o + "\"";
+}
+
+std::string toml_array(const std::vector<double>& v) {
+  std::string s = "[";
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + num(v[i], "%.10g");
+  return s + "]";
+}
+
+void write_text(const fs::path& p, const std::string& text) {
+  if (p.has_parent_path()) fs::create_directories(p.parent_path());
+  std::ofstream f(p);
+  if (!f) throw std::runtime_error("cannot write " + p.string());
+  f << text;
+  if (!f.flush()) throw std::runtime_error("write failed: " + p.string());
+}
+
+/// Line of a key in the parsed file (0 when unknown).
+long line_of(const toml::table& root, const std::string& table, const std::string& key) {
+  if (const auto* t = root[table].as_table())
+    if (const auto* n = t->get(key)) return static_cast<long>(n->source().begin.line);
+  return 0;
+}
+
+std::string where(const std::string& path, long line) { return line > 0 ? path + ":" + std::to_string(line) : path; }
+
+double cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+/// Every `step`-th sample, so plot files stay small.
+size_t stride(size_t n) { return std::max<size_t>(1, n / 6000); }
+
+std::string effect_params_json(const CandidateResult& c) {
+  std::string s = "{";
+  for (size_t i = 0; i < c.specs.size(); ++i) s += (i ? ", " : "") + quoted(c.specs[i].name) + ": " + num(c.effect.p[i]);
+  return s + "}";
+}
+
+/// The regime variable to plot the residual against for this verdict.
+enum class RegimeAxis { voltage, displacement, time, voltage_rate };
+
+RegimeAxis regime_axis(EffectKind k) {
+  switch (k) {
+    case EffectKind::drift: return RegimeAxis::time;
+    case EffectKind::saturation:
+    case EffectKind::bias_dependent_dynamics:
+    case EffectKind::asymmetric_dynamics: return RegimeAxis::displacement;
+    case EffectKind::delay:
+    case EffectKind::slew_limit:
+    case EffectKind::resonance: return RegimeAxis::voltage_rate;
+    default: return RegimeAxis::voltage;
+  }
+}
+
+void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vector<Series>& data,
+                  const std::vector<std::string>& names, const std::string& summary, const std::string& model_path) {
+  fs::create_directories(dir);
+  const size_t R = data.size();
+  // Data files: t, y, y_baseline, y_fitted, residual_baseline, residual_fitted, u, du/dt, direction
+  for (size_t i = 0; i < R; ++i) {
+    std::ostringstream d;
+    d << "# t_s y_um y_baseline y_fitted res_baseline res_fitted u_V du_dt_V_per_s rising held_out\n";
+    const auto& s = data[i];
+    const size_t st = stride(s.t_s.size());
+    for (size_t k = 0; k < s.t_s.size(); k += st) {
+      const double du = k > 0 ? (s.u_V[k] - s.u_V[k - 1]) / s.sample_time_s : 0.0;
+      const size_t kn = std::min(k + st, s.t_s.size() - 1);
+      const int rising = s.u_V[kn] >= s.u_V[k] ? 1 : 0;
+      d << s.t_s[k] << ' ' << s.y_um[k] << ' ' << r.y_baseline_um[i][k] << ' ' << r.y_fitted_um[i][k] << ' '
+        << s.y_um[k] - r.y_baseline_um[i][k] << ' ' << s.y_um[k] - r.y_fitted_um[i][k] << ' ' << s.u_V[k] << ' ' << du
+        << ' ' << rising << ' ' << static_cast<int>(r.held_out[i][k]) << '\n';
+    }
+    write_text(dir / ("rec" + std::to_string(i) + ".dat"), d.str());
+  }
+  const auto dat = [&](size_t i) { return "'" + (dir / ("rec" + std::to_string(i) + ".dat")).string() + "'"; };
+  const std::string rows = std::to_string(R);
+  std::ostringstream gp;
+  gp << "set terminal pngcairo size 1200," << 360 * R << " font ',10'\nset grid\nset key outside right\n";
+  gp << "set output '" << (dir / "measured_vs_simulated.png").string() << "'\nset multiplot layout " << rows
+     << ",1 title 'Measured vs simulated from the recorded u (output error)'\nset xlabel 't (s)'\nset ylabel 'y (um)'\n";
+  for (size_t i = 0; i < R; ++i)
+    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
+       << " u 1:2 w l lc rgb '#999999' t 'measured', '' u 1:3 w l lc rgb '#1f77b4' t 'nominal model', '' u 1:4 w l lc rgb '#d62728' t 'augmented model'\n";
+  gp << "unset multiplot\n";
+  // Residual over time with the mismatch windows shaded.
+  gp << "set output '" << (dir / "residual.png").string() << "'\nset multiplot layout " << rows
+     << ",1 title 'Residual of the nominal model; shaded: located mismatch windows; dashed: +-2 sigma noise'\n"
+     << "set ylabel 'y minus model (um)'\n";
+  for (size_t i = 0; i < R; ++i) {
+    int obj = 1;
+    for (const auto& w : r.mismatch)
+      if (w.recording == static_cast<int>(i))
+        gp << "set object " << obj++ << " rect from " << w.t_start_s << ", graph 0 to " << w.t_end_s
+           << ", graph 1 fc rgb '#ffe0e0' fs solid 1.0 noborder behind\n";
+    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
+       << " u 1:5 w l lc rgb '#1f77b4' t 'residual', " << 2 * r.noise_sigma_um << " w l dt 2 lc rgb 'black' t '+2 sigma', "
+       << -2 * r.noise_sigma_um << " w l dt 2 lc rgb 'black' notitle\n";
+    for (int o = 1; o < obj; ++o) gp << "unset object " << o << "\n";
+  }
+  gp << "unset multiplot\n";
+  // Residual against the regime variable.
+  const auto axis = regime_axis(r.chosen == EffectKind::none && !r.candidates.empty() ? r.candidates.front().effect.kind : r.chosen);
+  std::string col = "7", xlabel = "u (V)";
+  if (axis == RegimeAxis::displacement) col = "3", xlabel = "simulated displacement (um)";
+  if (axis == RegimeAxis::time) col = "1", xlabel = "t (s)";
+  if (axis == RegimeAxis::voltage_rate) col = "8", xlabel = "du/dt (V/s)";
+  gp << "set output '" << (dir / "residual_vs_regime.png").string() << "'\nset terminal pngcairo size 1000,600\n"
+     << "set title 'Nominal-model residual vs the regime variable, split by direction of the voltage'\nset xlabel '" << xlabel
+     << "'\nset ylabel 'y minus model (um)'\nplot ";
+  for (size_t i = 0; i < R; ++i)
+    gp << (i ? ", " : "") << dat(i) << " u " << col << ":($9==1?$5:1/0) w p pt 7 ps 0.3 lc rgb '#d62728' t '" << (i ? "" : "u rising")
+       << "', " << dat(i) << " u " << col << ":($9==0?$5:1/0) w p pt 7 ps 0.3 lc rgb '#1f77b4' t '" << (i ? "" : "u falling") << "'";
+  gp << "\n";
+  // Before / after on the held-out segments.
+  gp << "set output '" << (dir / "validation.png").string() << "'\nset terminal pngcairo size 1200," << 360 * R
+     << " font ',10'\nset multiplot layout " << rows
+     << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
+  for (size_t i = 0; i < R; ++i)
+    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
+       << " u 1:($10==1?$5:1/0) w l lc rgb '#1f77b4' t 'before', '' u 1:($10==1?$6:1/0) w l lc rgb '#d62728' t 'after'\n";
+  gp << "unset multiplot\n";
+  write_text(dir / "diagnose.gp", gp.str());
+  run_gnuplot(dir / "diagnose.gp");
+
+  std::ostringstream md;
+  md << "# pvcgel diagnose\n\n**Verdict: " << r.verdict << "**\n\n" << r.explanation << "\n\n";
+  md << "| | RMSE all (um) | fit segment (um) | held-out (um) |\n|---|---|---|---|\n";
+  md << "| nominal model | " << num(r.baseline.rmse_um, "%.4f") << " | " << num(r.baseline.rmse_fit_um, "%.4f") << " | "
+     << num(r.baseline.rmse_validation_um, "%.4f") << " |\n";
+  md << "| augmented model | " << num(r.fitted.rmse_um, "%.4f") << " | " << num(r.fitted.rmse_fit_um, "%.4f") << " | "
+     << num(r.fitted.rmse_validation_um, "%.4f") << " |\n\nSensor noise estimated from the data: "
+     << num(r.noise_sigma_um, "%.4f") << " um.\n\n";
+  if (!model_path.empty()) md << "Augmented model (daemon-loadable): `" << model_path << "`\n\n";
+  md << "## Where the model disagrees\n\n";
+  if (r.mismatch.empty()) md << "No window exceeds the noise.\n\n";
+  else {
+    md << "| recording | from (s) | to (s) | RMS (um) | regime |\n|---|---|---|---|---|\n";
+    for (const auto& w : r.mismatch)
+      md << "| " << fs::path(names[static_cast<size_t>(w.recording)]).filename().string() << " | " << num(w.t_start_s, "%.2f")
+         << " | " << num(w.t_end_s, "%.2f") << " | " << num(w.rms_um, "%.3f") << " | " << w.regime << " |\n";
+    md << "\n";
+  }
+  md << "![measured vs simulated](measured_vs_simulated.png)\n\n![residual](residual.png)\n\n"
+     << "![residual vs regime](residual_vs_regime.png)\n\n## Candidates (best first)\n\n";
+  md << "| effect | parameters | evidence R2 | fit RMSE (um) | held-out RMSE (um) |\n|---|---|---|---|---|\n";
+  for (const auto& c : r.candidates) {
+    std::string p;
+    for (size_t i = 0; i < c.specs.size(); ++i) p += (i ? ", " : "") + c.specs[i].name + " = " + num(c.effect.p[i], "%.4g");
+    md << "| " << to_string(c.effect.kind) << " | " << p << " | " << num(c.evidence_r2, "%.3f") << " | "
+       << (c.fitted ? num(c.errors.rmse_fit_um, "%.4f") : "-") << " | " << (c.fitted ? num(c.errors.rmse_validation_um, "%.4f") : "-")
+       << " |\n";
+  }
+  md << "\n## Before and after on held-out data\n\n![validation](validation.png)\n\n```\n" << summary << "```\n";
+  write_text(dir / "report.md", md.str());
+}
+
+}  // namespace
+
+LoadedModel load_model(const std::string& path) {
+  toml::table root;
+  try {
+    root = toml::parse_file(path);
+  } catch (const toml::parse_error& e) {
+    throw std::runtime_error(where(path, static_cast<long>(e.source().begin.line)) + ": not valid TOML: " +
+                             std::string(e.description()));
+  }
+  LoadedModel m;
+  try {
+    m.model = control::parse_model(root, path);
+  } catch (const control::ConfigError& e) {
+    const auto dot = e.key().find('.');
+    const std::string key = dot == std::string::npos ? "" : e.key().substr(dot + 1, e.key().find_first_of(".[", dot + 1) - dot - 1);
+    throw std::runtime_error(where(path, line_of(root, "model", key)) + ": " + e.what());
+  }
+  if (const auto* t = root["model"].as_table(); t && t->contains("io_delay_samples")) {
+    const auto v = t->get("io_delay_samples")->value_exact<int64_t>();
+    if (!v || *v < 0 || *v > 8)
+      throw std::runtime_error(where(path, line_of(root, "model", "io_delay_samples")) +
+                               ": model.io_delay_samples: must be an integer 0..8");
+    m.io_delay_samples = static_cast<int>(*v);
+  }
+  if (!m.model.G.is_stable())
+    throw std::runtime_error(where(path, line_of(root, "model", "G_den")) + ": model.G_den: G(s) = " +
+                             m.model.G.to_string() + " is unstable (a pole in the closed right half plane): "
+                             "an output-error simulation of it diverges");
+  if (m.model.G.relative_degree() < 0)
+    throw std::runtime_error(where(path, line_of(root, "model", "G_num")) + ": model.G_num: G(s) is improper");
+  return m;
+}
+
+std::string augmented_model_path(const DiagnoseArgs& a) {
+  if (!a.out.empty()) return a.out;
+  if (!a.report.empty()) return (fs::path(a.report) / "augmented_model.toml").string();
+  if (!a.predict.empty()) return a.predict + "augmented_model.toml";
+  if (!a.json.empty()) return (fs::path(a.json).replace_extension("").string()) + ".augmented.toml";
+  return "";
+}
+
+std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, const std::string& comment) {
+  const auto& m = lm.model;
+  std::ostringstream s;
+  std::istringstream in(comment);
+  for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
+  s << "#\n# [model] is the nominal model the recordings were compared with (what the controller uses).\n"
+    << "# [sim.truth] is that model plus the diagnosed effect ([sim.truth.effect]), so\n"
+    << "#   pvcgeld --config THIS_FILE   (sim backend)\n"
+    << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n\n";
+  const std::string model_keys = "poly = " + toml_array(m.f.coefficients()) + "\nG_num = " + toml_array(m.G.num()) +
+                                 "\nG_den = " + toml_array(m.G.den()) + "\n";
+  s << "[model]\n" << model_keys << "io_delay_samples = " << lm.io_delay_samples << "\n\n";
+  if (const auto turn = m.f.first_turnover(1000.0)) {
+    // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
+    s << "# f turns over at " << num(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
+      << num(std::floor(0.99 * *turn), "%.0f") << "\n\n";
+  }
+  s << "[sim]\nio_delay_samples = " << lm.io_delay_samples << "\nnoise_sigma_um = " << num(r.noise_sigma_um, "%.4g")
+    << "\nquantization_um = 0.0\n\n"
+    << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effect replaces them.\n"
+    << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
+  s << "[sim.truth]\n" << model_keys;
+  if (r.chosen != EffectKind::none) {
+    const auto specs = parameter_specs(r.chosen, 1e-3, 1e300);
+    s << "\n# The diagnosed effect: " << physical_meaning(r.chosen) << ".\n"
+      << "# Form (control/diagnosis/effect.hpp, AugmentedPlant): see `pvcgel diagnose --help`; parameters:\n";
+    s << "[sim.truth.effect]\nname = " << quoted(std::string(to_string(r.chosen))) << "\n";
+    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << num(r.effect.p[i], "%.8g") << "\n";
+  } else {
+    s << "\n# No effect added (verdict: " << r.verdict << ").\n";
+  }
+  return s.str();
+}
+
+std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::string>& recordings,
+                           const std::vector<long>& skipped, double cpu) {
+  std::ostringstream j;
+  j << "{\n  \"verdict\": " << quoted(r.verdict) << ",\n  \"explanation\": " << quoted(r.explanation)
+    << ",\n  \"noise_sigma_um\": " << num(r.noise_sigma_um) << ",\n  \"effects\": [";
+  bool first = true;
+  for (const auto& c : r.candidates) {
+    if (!c.fitted) continue;
+    const double improvement = r.baseline.rmse_validation_um > 0 ? 1.0 - c.errors.rmse_validation_um / r.baseline.rmse_validation_um : 0.0;
+    j << (first ? "\n" : ",\n") << "    {\"name\": " << quoted(std::string(to_string(c.effect.kind)))
+      << ", \"params\": " << effect_params_json(c) << ", \"explanation\": " << quoted(c.explanation)
+      << ", \"rmse_fit_um\": " << num(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << num(c.errors.rmse_validation_um)
+      << ", \"evidence\": {\"coarse_grid_r2\": " << num(c.evidence_r2) << ", \"validation_rmse_reduction\": " << num(improvement)
+      << ", \"rmse_all_um\": " << num(c.errors.rmse_um) << ", \"penalised_score\": " << num(c.score)
+      << ", \"parameters\": " << c.specs.size() << "}}";
+    first = false;
+  }
+  j << "\n  ],\n  \"baseline\": {\"rmse_um\": " << num(r.baseline.rmse_um) << ", \"rmse_fit_um\": " << num(r.baseline.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << num(r.baseline.rmse_validation_um) << "},\n  \"fitted\": {\"rmse_um\": "
+    << num(r.fitted.rmse_um) << ", \"rmse_fit_um\": " << num(r.fitted.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << num(r.fitted.rmse_validation_um) << "},\n  \"mismatch\": [";
+  for (size_t i = 0; i < r.mismatch.size(); ++i) {
+    const auto& w = r.mismatch[i];
+    j << (i ? ",\n" : "\n") << "    {\"recording\": " << w.recording << ", \"t_start_s\": " << num(w.t_start_s)
+      << ", \"t_end_s\": " << num(w.t_end_s) << ", \"regime\": " << quoted(w.regime) << ", \"rms_um\": " << num(w.rms_um) << "}";
+  }
+  j << "\n  ],\n  \"recordings\": [";
+  for (size_t i = 0; i < recordings.size(); ++i)
+    j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
+      << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
+  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << num(cpu) << "\n}\n";
+  return j.str();
+}
+
+DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
+  const double cpu0 = cpu_s();
+  const LoadedModel lm = load_model(a.model);
+  std::vector<Series> data;
+  std::vector<long> skipped;
+  for (const auto& path : a.recordings) {
+    const Recording rec = read_recording(path);
+    Series s;
+    s.t_s = rec.col("t_s");
+    s.u_V = rec.col("u_V");
+    s.y_um = rec.col("y_um");
+    s.sample_time_s = rec.sample_time_s;
+    try {
+      check_series(s, lm.model);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(path + ": " + e.what());
+    }
+    data.push_back(std::move(s));
+    skipped.push_back(rec.skipped_rows);
+  }
+  DiagnosisOptions opt;
+  opt.io_delay_samples = lm.io_delay_samples;
+  DiagnoseOutcome out;
+  try {
+    out.result = diagnose(lm.model, data, opt);
+  } catch (const control::ConfigError& e) {
+    const toml::table root = toml::parse_file(a.model);
+    const std::string key = e.key() == "model.poly" ? "poly" : "G_den";
+    throw std::runtime_error(where(a.model, line_of(root, "model", key)) + ": " + e.what());
+  }
+  const auto& r = out.result;
+  const double cpu = cpu_s() - cpu0;
+
+  std::ostringstream s;
+  s << "verdict: " << r.verdict << "\n" << r.explanation << "\n";
+  s << "noise (estimated): " << num(r.noise_sigma_um, "%.4f") << " um\n";
+  s << "nominal model:   RMSE " << num(r.baseline.rmse_um, "%.4f") << " um, held-out " << num(r.baseline.rmse_validation_um, "%.4f") << " um\n";
+  s << "augmented model: RMSE " << num(r.fitted.rmse_um, "%.4f") << " um, held-out " << num(r.fitted.rmse_validation_um, "%.4f") << " um\n";
+  for (size_t i = 0; i < skipped.size(); ++i)
+    if (skipped[i] > 0) s << a.recordings[i] << ": " << skipped[i] << " rows with non-finite t_s/u_V/y_um skipped\n";
+  for (const auto& w : r.mismatch)
+    s << "mismatch: recording " << w.recording << " t " << num(w.t_start_s, "%.2f") << ".." << num(w.t_end_s, "%.2f")
+      << " s, RMS " << num(w.rms_um, "%.3f") << " um, " << w.regime << "\n";
+  s << "candidates (best first):\n";
+  for (const auto& c : r.candidates) {
+    s << "  " << to_string(c.effect.kind) << ": evidence R2 " << num(c.evidence_r2, "%.3f");
+    if (c.fitted) s << ", fit " << num(c.errors.rmse_fit_um, "%.4f") << " um, held-out " << num(c.errors.rmse_validation_um, "%.4f") << " um";
+    s << "\n";
+  }
+  s << "cpu: " << num(cpu, "%.2f") << " s (" << r.simulations << " simulations)\n";
+  out.summary = s.str();
+
+  if (!a.predict.empty()) {
+    for (size_t i = 0; i < data.size(); ++i) {
+      std::ostringstream p;
+      p << "t_s,y_um_baseline,y_um_fitted\n";
+      for (size_t k = 0; k < data[i].t_s.size(); ++k)
+        p << num(data[i].t_s[k], "%.6f") << ',' << num(r.y_baseline_um[i][k], "%.6f") << ',' << num(r.y_fitted_um[i][k], "%.6f") << '\n';
+      write_text(a.predict + std::to_string(i) + ".csv", p.str());
+    }
+  }
+  const std::string model_path = augmented_model_path(a);
+  if (!model_path.empty()) {
+    const std::string text = augmented_model_toml(lm, r, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
+    // The file must be what the daemon accepts: parse it back before writing.
+    try {
+      (void)control::parse_configuration(toml::parse(text), model_path);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(std::string("internal: the augmented model does not parse back: ") + e.what());
+    }
+    write_text(model_path, text);
+    out.augmented_model_path = model_path;
+  }
+  if (!a.json.empty()) write_text(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
+  if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
+  return out;
+}
+
+void add_diagnose_command(CLI::App& app) {
+  auto args = std::make_shared<DiagnoseArgs>();
+  auto* cmd = app.add_subcommand(
+      "diagnose",
+      "Locate the sim-to-real mismatch in recordings, name the missing physics (hysteresis, creep, dead_zone, "
+      "saturation, delay, asymmetric_dynamics, slew_limit, resonance, drift, bias_dependent_dynamics), fit it and "
+      "show the improvement on held-out data (the last 3 s of every 10 s of each recording)");
+  cmd->add_option("--model", args->model, "TOML file with the [model] table (or a full daemon config)")
+      ->required()->check(CLI::ExistingFile);
+  cmd->add_option("--json", args->json, "write the machine-readable report to FILE");
+  cmd->add_option("--predict", args->predict, "write PREFIX<k>.csv (t_s,y_um_baseline,y_um_fitted) per recording");
+  cmd->add_option("--report", args->report, "write report.md and PNG plots to DIR");
+  cmd->add_option("--out", args->out,
+                  "augmented model file (default: DIR/augmented_model.toml with --report, else "
+                  "PREFIXaugmented_model.toml with --predict, else REPORT.augmented.toml next to --json)");
+  cmd->add_flag("--quiet", args->quiet, "print nothing on success");
+  cmd->add_option("recordings", args->recordings, "recordings (daemon format: t_s,u_V,y_um, ...)")
+      ->required()->check(CLI::ExistingFile);
+  cmd->callback([args] {
+    const auto out = run_diagnose(*args);
+    if (!args->quiet) {
+      std::cout << out.summary;
+      if (!out.augmented_model_path.empty()) std::cout << "wrote " << out.augmented_model_path << "\n";
+      if (!args->json.empty()) std::cout << "wrote " << args->json << "\n";
+      if (!args->report.empty()) std::cout << "wrote " << (fs::path(args->report) / "report.md").string() << "\n";
+    }
+  });
+}
+
+}  // namespace pvcgel::tools

@@ -1,0 +1,40 @@
+#pragma once
+/// @file
+/// The blind suite for `pvcgel diagnose`: generated recordings with a concealed
+/// effect, labels kept apart, scored by verdict accuracy, false alarms, the
+/// held-out RMSE ratio on correct cases and the time per case.
+
+#include <array>
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "control/diagnosis/generator.hpp"
+
+namespace pvcgel::tools {
+
+/// Scores of one suite run.
+struct BlindSuiteResult {
+  static constexpr int kLabels = 12;  ///< none, the ten effects, unexplained (verdict only)
+  std::array<std::array<int, kLabels>, kLabels> confusion{};  ///< [truth][verdict]
+  int cases = 0, correct = 0;
+  int none_cases = 0, false_alarms = 0;      ///< "none" truths diagnosed as anything else
+  int out_of_spec = 0;                       ///< cases whose effect missed the concealment targets
+  double worst_ratio = 0.0, mean_ratio = 0.0;  ///< held-out RMSE fitted / nominal on correct effect cases
+  double max_case_s = 0.0, mean_case_s = 0.0;  ///< diagnosis wall time per case
+  [[nodiscard]] double accuracy() const { return cases ? static_cast<double>(correct) / cases : 0.0; }
+};
+
+/// Runs `cases` blind cases (blind_suite_plan(cases, seed)); one line per case
+/// goes to `log` (the truth is printed only after the verdict). With
+/// `save_dir`, every case is also written there as a daemon recording
+/// (caseNN.csv), with the nominal model (model.toml) and, apart, labels.csv.
+BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& log,
+                                 const control::diagnosis::GeneratorOptions& options = {},
+                                 const std::string& save_dir = "");
+
+/// The confusion matrix and the scores as text.
+std::string format_suite(const BlindSuiteResult& r);
+
+}  // namespace pvcgel::tools
