@@ -80,6 +80,8 @@ class Process final {
     return r;
   }
   [[nodiscard]] std::string err_so_far() const { return slurp(err_path_); }
+  /// Process id while it runs (0 once waited for).
+  [[nodiscard]] pid_t pid() const { return pid_; }
 
  private:
   pid_t pid_ = 0;
