@@ -117,6 +117,33 @@ bool DdsBridge::rate_allows(const std::string& client_id, bool trajectory, doubl
   return trajectory ? it->second.first.allow(now_s) : it->second.second.allow(now_s);
 }
 
+bool DdsBridge::is_resend(const std::string& client_id, std::uint64_t seq, bool is_trajectory) {
+  auto& list = recent_[client_id];
+  for (const auto& r : list) {
+    if (r.seq != seq || r.is_trajectory != is_trajectory) continue;
+    if (r.answered) {
+      pvcgel_v1_CommandReply out{};
+      copy_string(out.rig_id, settings_.rig_id);
+      copy_string(out.client_id, client_id);
+      out.seq = seq;
+      out.is_trajectory = is_trajectory;
+      out.accepted = r.reason == RejectReason::accepted;
+      out.reason = static_cast<uint8_t>(r.reason);
+      copy_string(out.detail, r.detail);
+      dds_write(reply_writer_.get(), &out);
+    }
+    return true;
+  }
+  if (recent_.size() > 1024) recent_.clear();  // bounded: a client churning ids loses only resend detection
+  auto& fresh = recent_[client_id];
+  Recent entry;
+  entry.seq = seq;
+  entry.is_trajectory = is_trajectory;
+  fresh.push_back(std::move(entry));
+  if (fresh.size() > 32) fresh.pop_front();
+  return false;
+}
+
 void DdsBridge::count_reject(RejectReason r, const std::string& detail) {
   counters_.rejects_total.fetch_add(1, std::memory_order_relaxed);
   counters_.rejects_by_reason[static_cast<std::size_t>(r)].fetch_add(1, std::memory_order_relaxed);
@@ -127,6 +154,12 @@ void DdsBridge::count_reject(RejectReason r, const std::string& detail) {
 void DdsBridge::reply(const std::string& client_id, std::uint64_t seq, bool is_trajectory, RejectReason reason,
                       const std::string& detail) {
   if (reason != RejectReason::accepted) count_reject(reason, detail);
+  for (auto& r : recent_[client_id])
+    if (r.seq == seq && r.is_trajectory == is_trajectory) {
+      r.answered = true;
+      r.reason = reason;
+      r.detail = detail;
+    }
   if (reason == RejectReason::rate_limited) {
     // A flooding client gets at most a few answers per second; every refusal is still counted.
     double& last = last_throttle_reply_s_[client_id];
@@ -161,6 +194,7 @@ void DdsBridge::take_trajectories() {
         continue;
       }
       const std::string client(t->client_id);
+      if (is_resend(client, t->chunk_seq, true)) continue;
       if (!rate_allows(client, true, steady_s())) {
         reply(client, t->chunk_seq, true, RejectReason::rate_limited,
               "more than " + std::to_string(static_cast<int>(limits_.max_chunks_per_s)) + " trajectory chunks/s");
@@ -222,6 +256,7 @@ void DdsBridge::take_commands() {
         continue;
       }
       const std::string client(c->client_id);
+      if (is_resend(client, c->command_seq, false)) continue;
       if (!rate_allows(client, false, steady_s())) {
         reply(client, c->command_seq, false, RejectReason::rate_limited,
               "more than " + std::to_string(static_cast<int>(limits_.max_commands_per_s)) + " commands/s");

@@ -6,6 +6,7 @@
 /// out through the same participant from the record consumer thread.
 
 #include <array>
+#include <deque>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -67,6 +68,8 @@ class DdsBridge final {
              const std::string& detail);
   void count_reject(RejectReason r, const std::string& detail);
   bool rate_allows(const std::string& client_id, bool trajectory, double now_s);
+  /// True when (client, seq) was seen recently: a resend. Answers it again if the answer is known.
+  bool is_resend(const std::string& client_id, std::uint64_t seq, bool is_trajectory);
 
   dds::DdsSettings settings_;
   SetpointLimits limits_;
@@ -80,6 +83,14 @@ class DdsBridge final {
   std::unordered_map<std::uint32_t, Pending> pending_;
   std::unordered_map<std::string, std::pair<RateLimiter, RateLimiter>> limiters_;
   std::unordered_map<std::string, double> last_throttle_reply_s_;
+  struct Recent {
+    std::uint64_t seq = 0;
+    bool is_trajectory = false;
+    bool answered = false;
+    RejectReason reason = RejectReason::accepted;
+    std::string detail;
+  };
+  std::unordered_map<std::string, std::deque<Recent>> recent_;  // last 32 inputs per client
   std::uint32_t new_ticket() noexcept { return ++next_ticket_ == 0 ? ++next_ticket_ : next_ticket_; }
   std::uint32_t next_ticket_ = 0;
   std::uint8_t last_reject_reason_ = 0;

@@ -184,12 +184,12 @@ const pvcgel_v1_Status& DdsClient::status() {
   return *status_;
 }
 
-std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t argument) {
+std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t argument, std::uint64_t seq) {
   ensure_writers();
   pvcgel_v1_Command c{};
   copy_string(c.rig_id, opt_.rig);
   copy_string(c.client_id, client_id_);
-  c.command_seq = ++next_seq_;
+  c.command_seq = seq != 0 ? seq : ++next_seq_;
   c.kind = static_cast<uint8_t>(kind);
   c.argument = argument;
   if (const auto rc = dds_write(command_writer_.get(), &c); rc < 0)
@@ -226,9 +226,17 @@ std::vector<pvcgel_v1_CommandReply> DdsClient::take_replies() {
   return out;
 }
 
-Reply DdsClient::wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject) {
+Reply DdsClient::wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject,
+                            const std::function<void()>& resend) {
   const auto deadline = Clock::now() + std::chrono::duration<double>(opt_.wait_s);
+  auto next_resend = Clock::now() + std::chrono::seconds(1);
   for (;;) {
+    if (resend && Clock::now() > next_resend) {
+      // The daemon's reader may not have matched our writer yet when the sample
+      // went out (discovery is not symmetric); the same seq again is answered once.
+      resend();
+      next_resend = Clock::now() + std::chrono::seconds(1);
+    }
     auto replies = take_replies();
     for (auto it = replies.begin(); it != replies.end(); ++it) {
       if (it->seq != seq || it->is_trajectory != is_trajectory) continue;
@@ -256,12 +264,14 @@ Reply DdsClient::command(daemon::CommandKind kind, std::uint8_t argument, bool t
   static constexpr const char* kNames[] = {"?", "arm", "start", "stop", "reset", "mode", "target", "clear"};
   const auto k = static_cast<std::size_t>(kind);
   const std::string what = std::string("command '") + (k < std::size(kNames) ? kNames[k] : "?") + "'";
-  return wait_reply(publish_command(kind, argument), false, what.c_str(), throw_on_reject);
+  const std::uint64_t seq = publish_command(kind, argument);
+  return wait_reply(seq, false, what.c_str(), throw_on_reject, [&] { publish_command(kind, argument, seq); });
 }
 
 Reply DdsClient::send(pvcgel_v1_Trajectory& t, bool throw_on_reject) {
   if (!status_) connect();
-  return wait_reply(publish_trajectory(t), true, "trajectory", throw_on_reject);
+  const std::uint64_t seq = publish_trajectory(t);
+  return wait_reply(seq, true, "trajectory", throw_on_reject, [&] { dds_write(trajectory_writer_.get(), &t); });
 }
 
 std::vector<pvcgel_v1_Telemetry> DdsClient::take_telemetry(int max) {

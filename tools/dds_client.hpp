@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -64,8 +65,9 @@ class DdsClient final {
   /// Send a trajectory (rig_id, client_id, chunk_seq and publish time are
   /// filled in) and wait for its reply. @throws Rejected, std::runtime_error.
   Reply send(pvcgel_v1_Trajectory& t, bool throw_on_reject = true);
-  /// Publish without waiting (for flood tests): returns the seq used.
-  std::uint64_t publish_command(daemon::CommandKind kind, std::uint8_t argument);
+  /// Publish without waiting (for flood tests): returns the seq used (`seq` 0:
+  /// the next one; another value republishes, as a resend does).
+  std::uint64_t publish_command(daemon::CommandKind kind, std::uint8_t argument, std::uint64_t seq = 0);
   std::uint64_t publish_trajectory(pvcgel_v1_Trajectory& t);
   /// Take every reply that arrived (for flood tests).
   std::vector<pvcgel_v1_CommandReply> take_replies();
@@ -75,7 +77,8 @@ class DdsClient final {
   [[nodiscard]] const ClientOptions& options() const noexcept { return opt_; }
 
  private:
-  Reply wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject);
+  Reply wait_reply(std::uint64_t seq, bool is_trajectory, const char* what, bool throw_on_reject,
+                   const std::function<void()>& resend);
   void poll_status();
   void ensure_writers();
   bool matched_daemon(dds_entity_t endpoint, bool is_writer);

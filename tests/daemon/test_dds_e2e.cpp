@@ -379,3 +379,27 @@ TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
   EXPECT_EQ(s.target, 0);
   EXPECT_EQ(daemon.stop().exit_code, 0);
 }
+
+// A client resends a command that got no reply (the daemon's reader may not
+// have matched its writer yet); the daemon applies it once and answers again.
+TEST(DdsE2E, AResentCommandIsAppliedOnceAndAnsweredAgain) {
+  Process daemon(kDaemon, {"--config", write_config("resend", kDomain, "resend")});
+  tools::DdsClient c(options(kDomain, "resend"));
+  c.connect();
+  const auto seq = c.publish_command(daemon::CommandKind::arm, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  c.publish_command(daemon::CommandKind::arm, 0, seq);  // the same command again
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  int answers = 0;
+  for (const auto& r : c.take_replies()) {
+    if (r.seq != seq) continue;
+    ++answers;
+    EXPECT_TRUE(r.accepted) << "answered with the first outcome, not 'illegal_in_state': " << r.detail;
+  }
+  EXPECT_EQ(answers, 2);
+  const auto s = c.fresh_status();
+  EXPECT_EQ(s.commands_accepted, 1u);
+  EXPECT_EQ(s.rejects_total, 0u);
+  EXPECT_EQ(s.state, 1) << "ARMED once";
+  EXPECT_EQ(daemon.stop().exit_code, 0);
+}
