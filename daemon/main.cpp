@@ -155,9 +155,17 @@ int run(const Options& opt) {
   LoopState last_state = LoopState::disabled;
   FaultReason last_fault = FaultReason::none;
   auto last_status = last_ping;
+  const auto started_at = std::chrono::steady_clock::now();
   while (!loop_done.load(std::memory_order_acquire)) {
     const timespec timeout{0, 20'000'000};
     const int sig = sigtimedwait(&signals, nullptr, &timeout);
+    // Without a local trajectory (driven over DDS) --duration bounds the daemon's run time.
+    if (!has_trajectory && std::isfinite(cfg.duration_s) && !stop_sent &&
+        std::chrono::steady_clock::now() - started_at > std::chrono::duration<double>(cfg.duration_s)) {
+      std::cerr << "pvcgeld: --duration reached: ramping down\n";
+      loop.request_stop();
+      stop_sent = true;
+    }
     if (sig == SIGUSR1) {
       std::cerr << "pvcgeld: SIGUSR1: fault reset requested\n";
       loop.request_reset();
@@ -226,7 +234,7 @@ int main(int argc, char** argv) {
   app.add_option("-t,--trajectory", opt.trajectory,
                  "setpoints: hold:R | sine:OFFSET,AMP,FREQ | multisine:OFFSET,A1,F1,... | csv:FILE | "
                  "paper-0.1hz | paper-0.5hz | paper-1hz | paper-multi");
-  app.add_option("-d,--duration", opt.duration, "run the trajectory this long (s), then ramp down and exit")
+  app.add_option("-d,--duration", opt.duration, "run the trajectory this long (s), then ramp down and exit (without a trajectory: run this long)")
       ->check(CLI::PositiveNumber);
   app.add_option("-r,--record", opt.record, "record every cycle to this CSV file");
   app.add_option("--inject-fault", opt.inject, "sim backend only: KIND@SECONDS, e.g. sensor_nan@3");
