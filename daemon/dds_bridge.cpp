@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "daemon/control_loop.hpp"
-#include "pvcgel_v1.h"
+#include "daemon/dds/dds_messages.hpp"
 
 namespace pvcgel::daemon {
 
@@ -17,11 +17,6 @@ namespace {
 
 double steady_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-template <std::size_t N>
-void copy_string(char (&dst)[N], const std::string& src) {
-  std::snprintf(dst, N, "%s", src.c_str());
 }
 
 std::string detail_for_loop_refusal(RejectReason r, std::uint8_t state) {
@@ -123,13 +118,13 @@ bool DdsBridge::is_resend(const std::string& client_id, std::uint64_t seq, bool 
     if (r.seq != seq || r.is_trajectory != is_trajectory) continue;
     if (r.answered) {
       pvcgel_v1_CommandReply out{};
-      copy_string(out.rig_id, settings_.rig_id);
-      copy_string(out.client_id, client_id);
+      dds::copy_bounded(out.rig_id, settings_.rig_id);
+      dds::copy_bounded(out.client_id, client_id);
       out.seq = seq;
       out.is_trajectory = is_trajectory;
       out.accepted = r.reason == RejectReason::accepted;
       out.reason = static_cast<uint8_t>(r.reason);
-      copy_string(out.detail, r.detail);
+      dds::copy_bounded(out.detail, r.detail);
       dds_write(reply_writer_.get(), &out);
     }
     return true;
@@ -169,13 +164,13 @@ void DdsBridge::reply(const std::string& client_id, std::uint64_t seq, bool is_t
     if (last_throttle_reply_s_.size() > 1024) last_throttle_reply_s_.clear();
   }
   pvcgel_v1_CommandReply r{};
-  copy_string(r.rig_id, settings_.rig_id);
-  copy_string(r.client_id, client_id);
+  dds::copy_bounded(r.rig_id, settings_.rig_id);
+  dds::copy_bounded(r.client_id, client_id);
   r.seq = seq;
   r.is_trajectory = is_trajectory;
   r.accepted = reason == RejectReason::accepted;
   r.reason = static_cast<uint8_t>(reason);
-  copy_string(r.detail, detail);
+  dds::copy_bounded(r.detail, detail);
   dds_write(reply_writer_.get(), &r);
 }
 
@@ -200,18 +195,7 @@ void DdsBridge::take_trajectories() {
               "more than " + std::to_string(static_cast<int>(limits_.max_chunks_per_s)) + " trajectory chunks/s");
         continue;
       }
-      TrajectoryMessage m;
-      m.rig_id = t->rig_id;
-      m.client_id = t->client_id;
-      m.chunk_seq = t->chunk_seq;
-      m.target = t->target;
-      m.kind = t->kind;
-      m.timing = t->timing;
-      m.start_time_s = t->start_time_s;
-      m.period_s = t->period_s;
-      m.duration_s = t->duration_s;
-      m.blend_s = t->blend_s;
-      m.values = std::span<const double>(t->values._buffer, t->values._length);
+      const TrajectoryMessage m = dds::to_trajectory_message(*t);
       const LoopSnapshot& snap = io_.snapshot.read();
       LoopView view;
       view.now_s = snap.now_s;
@@ -299,7 +283,7 @@ void DdsBridge::drain_outcomes() {
 
 void DdsBridge::publish_status(const LoopSnapshot& snap) {
   pvcgel_v1_Status s{};
-  copy_string(s.rig_id, settings_.rig_id);
+  dds::copy_bounded(s.rig_id, settings_.rig_id);
   s.t_s = snap.now_s;
   s.state = snap.state;
   s.fault = snap.fault;
@@ -322,10 +306,10 @@ void DdsBridge::publish_status(const LoopSnapshot& snap) {
   for (std::size_t i = 0; i < counters_.rejects_by_reason.size() && i < std::size(s.rejects_by_reason); ++i)
     s.rejects_by_reason[i] = counters_.rejects_by_reason[i].load(std::memory_order_relaxed);
   s.last_reject_reason = last_reject_reason_;
-  copy_string(s.last_reject_detail, last_reject_detail_);
-  copy_string(s.config_hash, identity_.config_hash);
-  copy_string(s.version, identity_.version);
-  copy_string(s.hal_backend, identity_.hal_backend);
+  dds::copy_bounded(s.last_reject_detail, last_reject_detail_);
+  dds::copy_bounded(s.config_hash, identity_.config_hash);
+  dds::copy_bounded(s.version, identity_.version);
+  dds::copy_bounded(s.hal_backend, identity_.hal_backend);
   dds_write(status_writer_.get(), &s);
 }
 

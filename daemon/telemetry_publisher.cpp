@@ -1,8 +1,6 @@
 #include "daemon/telemetry_publisher.hpp"
 
-#include <cstdio>
-
-#include "pvcgel_v1.h"
+#include "daemon/dds/dds_messages.hpp"
 
 namespace pvcgel::daemon {
 
@@ -16,23 +14,7 @@ TelemetryPublisher::TelemetryPublisher(dds_entity_t participant, const dds::DdsS
 
 bool TelemetryPublisher::publish(const CycleRecord& r) noexcept {
   if (decimation_ > 1 && r.seq % static_cast<std::uint64_t>(decimation_) != 0) return true;
-  pvcgel_v1_Telemetry t{};
-  std::snprintf(t.rig_id, sizeof t.rig_id, "%s", rig_id_.c_str());
-  t.seq = r.seq;
-  t.t_s = r.t_s;
-  t.r_um = r.r_um;
-  t.y_um = r.y_um;
-  t.u_V = r.u_V;
-  t.e_um = r.e_um;
-  t.d_hat = r.d_hat;
-  t.latency_us = r.latency_us;
-  t.mode = static_cast<uint8_t>(r.mode);
-  t.state = static_cast<uint8_t>(r.state);
-  t.fault = static_cast<uint8_t>(r.fault);
-  t.high_voltage = r.high_voltage;
-  t.target = static_cast<uint8_t>(r.target);
-  t.chunk_seq = r.chunk_seq;
-  t.stamp_ns = r.stamp_ns;
+  const pvcgel_v1_Telemetry t = dds::to_telemetry(r, rig_id_);
   if (dds_write(writer_.get(), &t) < 0) {
     ++failures_;
     return false;

@@ -65,13 +65,9 @@ void run_client(F&& body) {
   } catch (const Rejected& e) {
     std::fprintf(stderr, "pvcgel: %s\n", e.what());
     throw CLI::RuntimeError(kExitRejected);
-  } catch (const std::runtime_error& e) {
-    const std::string what = e.what();
-    if (what.rfind("no daemon found", 0) == 0 || what.find("unknown; rigs seen") != std::string::npos) {
-      std::fprintf(stderr, "pvcgel: %s\n", e.what());
-      throw CLI::RuntimeError(kExitNoDaemon);
-    }
-    throw;
+  } catch (const NoDaemon& e) {
+    std::fprintf(stderr, "pvcgel: %s\n", e.what());
+    throw CLI::RuntimeError(kExitNoDaemon);
   }
 }
 

@@ -7,6 +7,8 @@
 #include <cstring>
 #include <thread>
 
+#include "daemon/dds/dds_messages.hpp"
+
 namespace pvcgel::tools {
 
 namespace {
@@ -19,14 +21,19 @@ std::int64_t realtime_ns() {
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-template <std::size_t N>
-void copy_string(char (&dst)[N], const std::string& src) {
-  std::snprintf(dst, N, "%s", src.c_str());
-}
-
 bool same_guid(const dds_guid_t& a, const dds_guid_t& b) { return std::memcmp(a.v, b.v, sizeof a.v) == 0; }
 
 }  // namespace
+
+NoDaemon no_daemon_error(const std::string& rig, int domain, double wait_s, const std::vector<std::string>& rigs_seen,
+                         const std::string& also_needs) {
+  if (rigs_seen.empty())
+    return NoDaemon("no daemon found within " + std::to_string(wait_s) + " s on domain " + std::to_string(domain) +
+                    " (is pvcgeld running with [dds] enabled" + also_needs + ", on the same DDS configuration?)");
+  std::string seen;
+  for (const auto& r : rigs_seen) seen += (seen.empty() ? "" : ", ") + r;
+  return NoDaemon("rig '" + rig + "' unknown; rigs seen: " + seen);
+}
 
 void add_client_options(CLI::App& cmd, ClientOptions& o) {
   if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
@@ -115,15 +122,7 @@ const pvcgel_v1_Status& DdsClient::connect() {
   while (!status_) {
     poll_status();
     if (status_) break;
-    if (Clock::now() > deadline) {
-      std::string seen;
-      for (const auto& r : other_rigs_) seen += (seen.empty() ? "" : ", ") + r;
-      throw std::runtime_error(other_rigs_.empty()
-                                   ? "no daemon found within " + std::to_string(opt_.wait_s) + " s on domain " +
-                                         std::to_string(opt_.domain) +
-                                         " (is pvcgeld running with [dds] enabled, on the same DDS configuration?)"
-                                   : "rig '" + opt_.rig + "' unknown; rigs seen: " + seen);
-    }
+    if (Clock::now() > deadline) throw no_daemon_error(opt_.rig, opt_.domain, opt_.wait_s, other_rigs_);
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   // Two daemons configured with one rig id would both obey every command: refuse to talk to either.
@@ -187,8 +186,8 @@ const pvcgel_v1_Status& DdsClient::status() {
 std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t argument, std::uint64_t seq) {
   ensure_writers();
   pvcgel_v1_Command c{};
-  copy_string(c.rig_id, opt_.rig);
-  copy_string(c.client_id, client_id_);
+  dds::copy_bounded(c.rig_id, opt_.rig);
+  dds::copy_bounded(c.client_id, client_id_);
   c.command_seq = seq != 0 ? seq : ++next_seq_;
   c.kind = static_cast<uint8_t>(kind);
   c.argument = argument;
@@ -199,8 +198,8 @@ std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t 
 
 std::uint64_t DdsClient::publish_trajectory(pvcgel_v1_Trajectory& t) {
   ensure_writers();
-  copy_string(t.rig_id, opt_.rig);
-  copy_string(t.client_id, client_id_);
+  dds::copy_bounded(t.rig_id, opt_.rig);
+  dds::copy_bounded(t.client_id, client_id_);
   t.chunk_seq = ++next_seq_;
   t.publish_time_ns = realtime_ns();
   if (const auto rc = dds_write(trajectory_writer_.get(), &t); rc < 0)

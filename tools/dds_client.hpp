@@ -38,6 +38,19 @@ struct Reply {
   std::string detail;
 };
 
+/// Thrown when no daemon answers for the rig (none at all, or only other rigs).
+class NoDaemon : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// The error for a rig that did not show up within `wait_s`: "no daemon found
+/// within N s on domain D ..." when nothing was seen, else "rig 'X' unknown;
+/// rigs seen: ...". Shared by every client that looks for a daemon.
+/// `also_needs` names a further daemon setting the caller depends on (e.g. " and reliable_telemetry = true").
+NoDaemon no_daemon_error(const std::string& rig, int domain, double wait_s, const std::vector<std::string>& rigs_seen,
+                         const std::string& also_needs = "");
+
 /// Thrown when the daemon refused a command or chunk; what() names the reason.
 class Rejected : public std::runtime_error {
  public:
@@ -53,8 +66,7 @@ class DdsClient final {
   explicit DdsClient(const ClientOptions& o, bool telemetry = false, bool reliable_telemetry = false);
 
   /// Wait for the rig's Status, then until the daemon's readers and writers
-  /// have matched ours. @throws std::runtime_error "no daemon found within N s"
-  /// or "rig 'X' unknown; rigs seen: ...".
+  /// have matched ours. @throws NoDaemon (see no_daemon_error).
   const pvcgel_v1_Status& connect();
   /// A Status published after this client matched the daemon (waits up to 1.5 s).
   const pvcgel_v1_Status& fresh_status();

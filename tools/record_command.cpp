@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "daemon/dds/dds_messages.hpp"
 #include "daemon/dds/dds_participant.hpp"
 #include "daemon/recorder.hpp"
 #include "tools/dds_client.hpp"
@@ -69,20 +70,7 @@ int record(const RecordArgs& a) {
         std::fprintf(stderr, "pvcgel record: receiving rig '%s' (from cycle %llu)\n", a.rig.c_str(),
                      static_cast<unsigned long long>(t->seq));
       }
-      daemon::CycleRecord r;
-      r.seq = t->seq;
-      r.t_s = t->t_s;
-      r.r_um = t->r_um;
-      r.y_um = t->y_um;
-      r.u_V = t->u_V;
-      r.e_um = t->e_um;
-      r.d_hat = t->d_hat;
-      r.latency_us = t->latency_us;
-      r.mode = static_cast<control::ControllerMode>(t->mode);
-      r.state = static_cast<daemon::LoopState>(t->state);
-      r.fault = static_cast<daemon::FaultReason>(t->fault);
-      r.high_voltage = t->high_voltage;
-      recorder->write(r);
+      recorder->write(dds::to_cycle_record(*t));
       last_t = t->t_s;
       last_sample = std::chrono::steady_clock::now();
       ++rows;
@@ -98,13 +86,8 @@ int record(const RecordArgs& a) {
                                  " rows kept in " + a.out);
       }
     } else if (std::chrono::steady_clock::now() - start > std::chrono::duration<double>(a.wait)) {
-      std::string seen;
-      for (const auto& r : other_rigs) seen += (seen.empty() ? "" : ", ") + r;
-      throw std::runtime_error(other_rigs.empty()
-                                   ? "no daemon found within " + std::to_string(a.wait) + " s on domain " +
-                                         std::to_string(a.domain) + " (is pvcgeld running with [dds] enabled and "
-                                         "reliable_telemetry = true, on the same DDS configuration?)"
-                                   : "rig '" + a.rig + "' unknown; rigs seen: " + seen);
+      throw no_daemon_error(a.rig, a.domain, a.wait, {other_rigs.begin(), other_rigs.end()},
+                            " and reliable_telemetry = true");
     }
     if (n == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }

@@ -14,6 +14,7 @@
 #include <dds/ddsi/ddsi_serdata_default.h>
 #include <dds/ddsi/q_protocol.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -24,8 +25,7 @@
 #include <iterator>
 #include <vector>
 
-#include "daemon/input_validation.hpp"
-#include "pvcgel_v1.h"
+#include "daemon/dds/dds_messages.hpp"
 
 using namespace pvcgel::daemon;
 
@@ -83,18 +83,7 @@ void check(bool ok, const char* what) {
 void fuzz_trajectory(const uint8_t* data, size_t size) {
   pvcgel_v1_Trajectory t{};
   if (!decode(trajectory_type(), data, size, &t)) return;
-  TrajectoryMessage m;
-  m.rig_id = t.rig_id;
-  m.client_id = t.client_id;
-  m.chunk_seq = t.chunk_seq;
-  m.target = t.target;
-  m.kind = t.kind;
-  m.timing = t.timing;
-  m.start_time_s = t.start_time_s;
-  m.period_s = t.period_s;
-  m.duration_s = t.duration_s;
-  m.blend_s = t.blend_s;
-  m.values = std::span<const double>(t.values._buffer, t.values._length);
+  const TrajectoryMessage m = pvcgel::dds::to_trajectory_message(t);  // exactly what the daemon validates
   const SetpointLimits limits;
   LoopView loop;
   loop.now_s = 5.0;
@@ -140,8 +129,9 @@ std::vector<uint8_t> encode(const Sertype& type, const void* sample, uint8_t sel
   dds_ostream_t os;
   dds_ostream_init(&os, 0, CDR_ENC_VERSION_1);
   check(dds_stream_write_sample(&os, sample, &type.st), "encode seed");
-  std::vector<uint8_t> out{selector};
-  out.insert(out.end(), os.m_buffer, os.m_buffer + os.m_index);
+  std::vector<uint8_t> out(1 + os.m_index);
+  out[0] = selector;
+  std::copy_n(os.m_buffer, os.m_index, out.begin() + 1);
   dds_ostream_fini(&os);
   return out;
 }
