@@ -86,6 +86,10 @@ class Controller final {
   [[nodiscard]] ControllerMode mode() const noexcept { return mode_; }
   /// Put every state at the nominal steady state for a constant reference r0.
   void reset_steady_state(double r0_um) noexcept;
+  /// The voltage actually applied is `V` (a bumpless start from the amplifier's
+  /// real output, or the safety envelope overriding the last step): the output
+  /// stage's slew limit continues from there.
+  void set_applied_voltage(double V) noexcept { output_.reset(V); }
   /// Voltage applied in the last step (or set by reset_steady_state).
   [[nodiscard]] double last_voltage_V() const noexcept { return output_.last_V(); }
   /// Reference samples beyond r[k] the feedforward uses.

@@ -1,8 +1,9 @@
 #pragma once
 /// @file
-/// One cycle of the real-time loop: read, check, control, clamp, write; and
-/// the safety state machine around it. No threads or clocks here (see
-/// realtime_thread.hpp), so every path can be tested cycle by cycle.
+/// One cycle of the real-time loop, as ros2_control's read / update / write:
+/// read and check the sensor; take inputs, transition, compute, govern (the
+/// safety envelope); write and check the actuator; publish. No threads or
+/// clocks here (see realtime_thread.hpp), so every path can be tested cycle by cycle.
 
 #include <array>
 #include <atomic>
@@ -10,6 +11,7 @@
 #include <string_view>
 
 #include "control/controller.hpp"
+#include "control/safety_envelope.hpp"
 #include "daemon/loop_io.hpp"
 #include "daemon/trajectory.hpp"
 #include "hal/hal.hpp"
@@ -18,7 +20,8 @@ namespace pvcgel::daemon {
 
 /// Safety states. DISABLED -> ARMED -> RUNNING; any fault or stop goes through
 /// RAMP_DOWN (output ramps to 0 V, then high voltage is disabled) to FAULT or
-/// DISABLED. FAULT is left only by an explicit reset.
+/// DISABLED. FAULT is left only by an explicit reset, to DISABLED (high voltage
+/// off); arming again is a separate, explicit command.
 enum class LoopState : std::uint8_t { disabled, armed, running, ramp_down, fault };
 
 /// Why the loop left RUNNING for FAULT. Carried in telemetry, recordings and logs.
@@ -31,7 +34,11 @@ enum class FaultReason : std::uint8_t {
   amplifier_fault,      ///< the amplifier (or its interlock) reports a fault
   overrun_storm,        ///< too many consecutive missed deadlines
   setpoint_stale,       ///< the setpoint source ran dry (policy ramp_down)
-  hal_error,            ///< another HAL failure (write failed, disconnected)
+  hal_error,            ///< another HAL failure on the sensor read (invalid reply, disconnected)
+  actuator_write_failed,  ///< writing the amplifier command failed (timeouts in a row, invalid reply, link lost)
+  hv_enable_failed,     ///< enabling high voltage failed (the arm is undone)
+  hv_disable_failed,    ///< disabling high voltage reported a failure (retried every cycle)
+  count_
 };
 
 std::string_view to_string(LoopState s) noexcept;
@@ -51,6 +58,9 @@ struct SafetyConfig {
   StaleSetpointPolicy stale_setpoint = StaleSetpointPolicy::hold;
   double soft_start_s = 2.0;          ///< blend from the measured position to the trajectory
   double open_loop_slew_V_per_s = 30000.0;  ///< slew limit on voltage setpoints (open-loop mode)
+  /// Slew limit on every voltage written (the amplifier's rating), except the
+  /// fault ramp-down which runs at ramp_down_V_per_s. Always on.
+  double output_slew_V_per_s = 30000.0;
 };
 
 /// One row of telemetry / recording. Row k: y measured at the start of cycle k
@@ -84,8 +94,9 @@ class ControlLoop final {
   CycleRecord cycle(float latency_us, int consecutive_overruns) noexcept;
   /// Ask for a clean stop (ramp down, disable, finish). Any thread.
   void request_stop() noexcept { stop_requested_.store(true, std::memory_order_relaxed); }
-  /// Explicit reset: FAULT -> DISABLED (ignored in other states). With auto-start
-  /// the loop then re-arms and starts the trajectory again from its soft start. Any thread.
+  /// Explicit reset: FAULT -> DISABLED with high voltage off (ignored in other
+  /// states). Never re-arms or restarts by itself: arming again is a command,
+  /// refused while the fault's cause is present. Any thread.
   void request_reset() noexcept { reset_requested_.store(true, std::memory_order_relaxed); }
   /// True once the loop has come to rest (DISABLED after a stop, or FAULT when
   /// `exit_on_fault`) and the caller may end the thread.
@@ -103,18 +114,47 @@ class ControlLoop final {
   /// snapshot every cycle. Call before the loop runs.
   void attach_io(LoopIo& io, const SetpointLimits& limits) noexcept {
     io_ = &io;
-    limits_ = limits;
+    set_limits(limits);
   }
+  /// The `[setpoints]` limits the safety envelope enforces on every reference
+  /// played (also local trajectories). Call before the loop runs.
+  void set_limits(const SetpointLimits& limits) noexcept;
+  /// Non-ok results of write_voltage and set_high_voltage so far (any thread).
+  [[nodiscard]] std::uint64_t actuator_failures() const noexcept {
+    return actuator_failures_.load(std::memory_order_relaxed);
+  }
+  /// The envelope (for tests and the stop summary: how often it had to act).
+  [[nodiscard]] const control::SafetyEnvelope& envelope() const noexcept { return envelope_; }
   /// Displacement (closed loop) or voltage (open loop) setpoints.
   [[nodiscard]] LoopTarget target() const noexcept { return target_.load(std::memory_order_relaxed); }
 
  private:
+  /// What the read step found this cycle.
+  struct Reading {
+    double y_um = 0.0;
+    hal::HalStatus status = hal::HalStatus::ok;
+    FaultReason fault = FaultReason::none;
+  };
+  Reading read_sensor() noexcept;
   FaultReason check_sensor(hal::HalStatus status, double y) noexcept;
+  /// Turns a write_voltage or set_high_voltage result into a fault (none when ok).
+  FaultReason check_actuator(hal::HalStatus status, FaultReason on_failure) noexcept;
+  /// set_high_voltage with its result checked; false (and a fault started) on failure.
+  bool set_high_voltage(bool on, LoopState& state) noexcept;
+  void transition(LoopState& state, const Reading& in, bool stop) noexcept;
+  void start_running(const Reading& in, bool voltage_mode) noexcept;
+  void compute(LoopState& state, const Reading& in, int consecutive_overruns, bool stop, CycleRecord& rec) noexcept;
+  FaultReason running_fault(const Reading& in, int consecutive_overruns, bool fresh, double t_traj) const noexcept;
+  /// The reference for the controller, through the envelope, with preview.
+  void governed_preview(double t_run, int n) noexcept;
+  void govern(LoopState& state, bool stop) noexcept;
+  void write_actuator(LoopState& state) noexcept;
+  void publish(CycleRecord& rec, LoopState state, LoopTarget target) noexcept;
   /// The setpoint before the soft-start blend; false when the received
   /// setpoints ran dry (the stale-setpoint case).
   bool base_reference(double t_run, double& value) const noexcept;
   double reference_at(double t_run) const noexcept;
-  void enter_ramp_down(FaultReason why) noexcept;
+  void enter_ramp_down(FaultReason why, LoopState& state) noexcept;
   /// Apply queued inputs; `state` may change (arm, stop, reset).
   void take_inputs(LoopState& state) noexcept;
   RejectReason apply_command(const LoopInput& in, LoopState& state) noexcept;
@@ -144,6 +184,15 @@ class ControlLoop final {
   double start_value_ = 0.0;        // where the soft start blends from (um, or V in voltage mode)
   double hold_value_ = 0.0;         // setpoint held after received setpoints ran dry
   double setpoint_V_ = 0.0;         // open-loop voltage after the slew limit
+  double u_requested_V_ = 0.0;      // what the control law (or open-loop setpoint) asked for this cycle
+  bool ramping_ = false;            // the fault/stop ramp owns the output this cycle (bypasses the slew limit)
+  int write_timeout_count_ = 0;
+  FaultReason cause_present_ = FaultReason::none;  // a fault's cause seen this cycle (sensor or actuator)
+  FaultReason actuator_cause_ = FaultReason::none; // the last write's problem, kept until a write succeeds
+  bool hv_disable_pending_ = false;                // disabling failed: retry every cycle
+  std::uint32_t last_ticket_ = 0;                  // the chunk whose pieces are arriving
+  control::SafetyEnvelope envelope_{};
+  std::atomic<std::uint64_t> actuator_failures_{0};
   LoopIo* io_ = nullptr;
   std::uint32_t refused_ticket_ = 0;  // the rest of this chunk is dropped unanswered
   SetpointLimits limits_{};

@@ -12,7 +12,21 @@ namespace pvcgel::daemon {
 
 using control::ConfigError;
 
+namespace {
+
+/// A finite value can still be absurd: each bound below is a physical one, named in the message.
+void check_bound(control::TableReader& t, const char* key, double v, double lo, double hi, const std::string& why) {
+  if (v >= lo && v <= hi) return;
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "%.6g is outside %.6g..%.6g: ", v, lo, hi);
+  throw ConfigError(t.key(key), buf + why);
+}
+
+}  // namespace
+
 DaemonConfig load_daemon_config(const std::string& path) {
+  if (std::filesystem::is_directory(path))
+    throw ConfigError("--config", "'" + path + "' is a directory, not a configuration file");
   std::ifstream in(path, std::ios::binary);
   // Unreadable or unparsable files are configuration errors too (exit 2: systemd must not restart).
   if (!in) throw ConfigError("--config", "cannot read configuration file '" + path + "'");
@@ -28,6 +42,10 @@ DaemonConfig load_daemon_config(const std::string& path) {
     os << path << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
     throw ConfigError("--config", os.str());
   }
+
+  if (root.empty())
+    throw ConfigError("--config", "'" + path + "' is empty (no table, no key); start from config/pvcgeld.toml or "
+                                  "config/pvcgeld-sim.toml");
 
   DaemonConfig cfg;
   cfg.rig = control::parse_configuration(root, path, {"loop", "hal", "safety", "run", "dds", "setpoints"});
@@ -49,13 +67,27 @@ DaemonConfig load_daemon_config(const std::string& path) {
     auto hal = top.table("hal");
     cfg.hal = parse_hal_config(hal, cfg.realtime.period_s);
     cfg.hal_backend = cfg.hal.backend;
+    if (cfg.hal.backend != "sim" && !root.contains("model"))
+      throw ConfigError("model", "backend '" + cfg.hal.backend + "' drives a real rig and needs its own identified "
+                                 "[model] (pvcgel ident); the built-in default is the paper's actuator, whose inverse "
+                                 "would be wrong for this one");
 
     auto s = top.table("safety");
     auto& sc = cfg.safety;
+    const auto& cc = cfg.rig.controller;
+    const double span_V = cc.voltage_max_V - cc.voltage_min_V;
+    // No amplifier swings its whole range in less than 10 loop cycles without ringing; a limit above that is none.
+    const double slew_bound = span_V / (10.0 * cfg.realtime.period_s);
+    sc.output_slew_V_per_s = s.number("output_slew_V_per_s", std::min(sc.output_slew_V_per_s, slew_bound));
+    check_bound(s, "output_slew_V_per_s", sc.output_slew_V_per_s, 1.0, slew_bound,
+                "above the voltage range in 10 cycles there is no slew limit (set the amplifier's rating)");
     sc.ramp_down_V_per_s = s.number("ramp_down_V_per_s", sc.ramp_down_V_per_s);
-    if (!(sc.ramp_down_V_per_s > 0.0)) throw ConfigError(s.key("ramp_down_V_per_s"), "must be positive");
+    check_bound(s, "ramp_down_V_per_s", sc.ramp_down_V_per_s, 1.0, sc.output_slew_V_per_s,
+                "the ramp to 0 V must be positive and no faster than the amplifier's slew limit output_slew_V_per_s");
     sc.sensor_min_um = s.number("sensor_min_um", sc.sensor_min_um);
     sc.sensor_max_um = s.number("sensor_max_um", sc.sensor_max_um);
+    check_bound(s, "sensor_min_um", sc.sensor_min_um, -1e5, 1e5, "a displacement sensor range beyond +-100 mm is not a gel rig's");
+    check_bound(s, "sensor_max_um", sc.sensor_max_um, -1e5, 1e5, "a displacement sensor range beyond +-100 mm is not a gel rig's");
     if (!(sc.sensor_max_um > sc.sensor_min_um)) throw ConfigError(s.key("sensor_max_um"), "must be above sensor_min_um");
     sc.sensor_stale_cycles = s.integer("sensor_stale_cycles", sc.sensor_stale_cycles);
     if (sc.sensor_stale_cycles < 0) throw ConfigError(s.key("sensor_stale_cycles"), "must be >= 0 (0: off)");
@@ -66,9 +98,10 @@ DaemonConfig load_daemon_config(const std::string& path) {
     else if (policy == "ramp_down") sc.stale_setpoint = StaleSetpointPolicy::ramp_down;
     else throw ConfigError(s.key("stale_setpoint"), "must be \"hold\" or \"ramp_down\"");
     sc.soft_start_s = s.number("soft_start_s", sc.soft_start_s);
-    if (!(sc.soft_start_s >= 0.0)) throw ConfigError(s.key("soft_start_s"), "must be >= 0");
-    sc.open_loop_slew_V_per_s = s.number("open_loop_slew_V_per_s", sc.open_loop_slew_V_per_s);
-    if (!(sc.open_loop_slew_V_per_s > 0.0)) throw ConfigError(s.key("open_loop_slew_V_per_s"), "must be positive");
+    check_bound(s, "soft_start_s", sc.soft_start_s, 0.0, 600.0, "a soft start longer than 10 minutes is a trajectory");
+    sc.open_loop_slew_V_per_s = s.number("open_loop_slew_V_per_s", std::min(sc.open_loop_slew_V_per_s, sc.output_slew_V_per_s));
+    check_bound(s, "open_loop_slew_V_per_s", sc.open_loop_slew_V_per_s, 1.0, sc.output_slew_V_per_s,
+                "open-loop setpoints are slew-limited within the amplifier's output_slew_V_per_s");
     s.finish();
 
     auto run = top.table("run");
@@ -115,23 +148,38 @@ DaemonConfig load_daemon_config(const std::string& path) {
     if (l.min_um < cfg.safety.sensor_min_um || l.max_um > cfg.safety.sensor_max_um)
       throw ConfigError(sp.key("max_um"), "the setpoint range must lie inside the sensor range [safety] sensor_min_um..sensor_max_um");
     positive("max_step_um", l.max_step_um);
+    check_bound(sp, "max_step_um", l.max_step_um, 0.0, l.max_um - l.min_um, "a step larger than the setpoint range");
     positive("max_slope_um_per_s", l.max_slope_um_per_s);
+    check_bound(sp, "max_slope_um_per_s", l.max_slope_um_per_s, 0.0, 1e5,
+                "100 mm/s is far beyond any gel actuator's speed");
     l.min_V = sp.number("min_V", cfg.rig.controller.voltage_min_V);
     l.max_V = sp.number("max_V", cfg.rig.controller.voltage_max_V);
     if (l.min_V < cfg.rig.controller.voltage_min_V || l.max_V > cfg.rig.controller.voltage_max_V || !(l.max_V > l.min_V))
       throw ConfigError(sp.key("max_V"), "min_V..max_V must be a range inside [controller] voltage_min_V..voltage_max_V");
     positive("max_step_V", l.max_step_V);
+    check_bound(sp, "max_step_V", l.max_step_V, 0.0, l.max_V - l.min_V, "a step larger than the voltage range");
     positive("max_slope_V_per_s", l.max_slope_V_per_s);
+    check_bound(sp, "max_slope_V_per_s", l.max_slope_V_per_s, 0.0, cfg.safety.output_slew_V_per_s,
+                "voltage setpoints cannot change faster than the amplifier's [safety] output_slew_V_per_s");
     positive("max_lead_s", l.max_lead_s);
+    check_bound(sp, "max_lead_s", l.max_lead_s, 0.0, 3600.0, "the loop queues at most 32 s of samples; an hour is the bound");
     positive("past_tolerance_s", l.past_tolerance_s);
+    check_bound(sp, "past_tolerance_s", l.past_tolerance_s, 0.0, 10.0, "a start more than 10 s late is not a start");
     l.max_chunk_samples = sp.integer("max_chunk_samples", l.max_chunk_samples);
     if (l.max_chunk_samples < 1 || l.max_chunk_samples > 1024)
       throw ConfigError(sp.key("max_chunk_samples"), "must be 1..1024 (the IDL's bound)");
     positive("max_chunks_per_s", l.max_chunks_per_s);
     positive("max_commands_per_s", l.max_commands_per_s);
     positive("burst_s", l.burst_s);
+    check_bound(sp, "max_chunks_per_s", l.max_chunks_per_s, 0.0, 1e4, "more chunks per second than loop cycles");
+    check_bound(sp, "max_commands_per_s", l.max_commands_per_s, 0.0, 1e3, "no operator sends 1000 commands per second");
+    check_bound(sp, "burst_s", l.burst_s, 0.0, 60.0, "a burst longer than a minute is not a burst");
     sp.finish();
   });
+  // The controller's own output stage slews within the envelope (so its anti-windup and DOB see what is applied).
+  auto& cc = cfg.rig.controller;
+  if (cc.slew_limit_V_per_s <= 0.0 || cc.slew_limit_V_per_s > cfg.safety.output_slew_V_per_s)
+    cc.slew_limit_V_per_s = cfg.safety.output_slew_V_per_s;
 
   std::uint64_t h = 1469598103934665603ull;
   for (unsigned char c : text) h = (h ^ c) * 1099511628211ull;

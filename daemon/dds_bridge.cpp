@@ -19,10 +19,14 @@ double steady_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-std::string detail_for_loop_refusal(RejectReason r, std::uint8_t state) {
+std::string detail_for_loop_refusal(RejectReason r, std::uint8_t state, std::uint8_t cause) {
   const std::string in_state = " (loop state " + std::string(to_string(static_cast<LoopState>(state))) + ")";
   switch (r) {
-    case RejectReason::illegal_in_state: return "not allowed now" + in_state;
+    case RejectReason::illegal_in_state:
+      if (cause != 0)
+        return "not allowed now" + in_state + ": the fault's cause is still present: " +
+               std::string(to_string(static_cast<FaultReason>(cause)));
+      return "not allowed now" + in_state;
     case RejectReason::step_too_large:
       return "the first setpoint steps from the one in force beyond the limit; send a blend_s long enough" + in_state;
     case RejectReason::queue_full: return "the loop's setpoint queue is full" + in_state;
@@ -148,7 +152,8 @@ void DdsBridge::count_reject(RejectReason r, const std::string& detail) {
 
 void DdsBridge::reply(const std::string& client_id, std::uint64_t seq, bool is_trajectory, RejectReason reason,
                       const std::string& detail) {
-  if (reason != RejectReason::accepted) count_reject(reason, detail);
+  // Back-pressure (busy) is flow control, not a refusal of the client's data: answered, not counted.
+  if (reason != RejectReason::accepted && reason != RejectReason::busy) count_reject(reason, detail);
   for (auto& r : recent_[client_id])
     if (r.seq == seq && r.is_trajectory == is_trajectory) {
       r.answered = true;
@@ -276,7 +281,7 @@ void DdsBridge::drain_outcomes() {
       (p.is_trajectory ? counters_.chunks_accepted : counters_.commands_accepted).fetch_add(1, std::memory_order_relaxed);
       reply(p.client_id, p.seq, p.is_trajectory, o->reason, "");
     } else {
-      reply(p.client_id, p.seq, p.is_trajectory, o->reason, detail_for_loop_refusal(o->reason, o->state));
+      reply(p.client_id, p.seq, p.is_trajectory, o->reason, detail_for_loop_refusal(o->reason, o->state, o->cause));
     }
   }
 }

@@ -12,7 +12,7 @@ constexpr std::string_view kReasonNames[] = {
     "accepted",      "malformed",       "not_finite",      "out_of_range",     "step_too_large",
     "slope_too_large", "in_the_past",   "too_far_ahead",   "chunk_too_large",  "bad_period",
     "bad_duration",  "target_mismatch", "queue_full",      "rate_limited",     "illegal_in_state",
-    "unknown_command", "bad_argument",  "other_rig"};
+    "unknown_command", "bad_argument",  "other_rig",       "busy"};
 static_assert(std::size(kReasonNames) == static_cast<std::size_t>(RejectReason::count_));
 
 template <typename... Args>
@@ -71,7 +71,7 @@ Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& li
     return reject(RejectReason::too_far_ahead, "start_time_s %.4f is more than %.3g s after the loop time %.4f",
                   m.start_time_s, limits.max_lead_s, loop.now_s);
   if (m.timing == 1 && loop.queued_until_s > loop.now_s + limits.max_lead_s)
-    return reject(RejectReason::too_far_ahead, "setpoints are already queued up to %.3f s, more than %.3g s ahead of %.3f",
+    return reject(RejectReason::busy, "setpoints are already queued up to %.3f s, more than %.3g s ahead of %.3f",
                   loop.queued_until_s, limits.max_lead_s, loop.now_s);
 
   SetpointSegment seg;
@@ -115,6 +115,7 @@ Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& li
       std::copy_n(m.values.begin() + static_cast<std::ptrdiff_t>(first), piece.count, piece.values.begin());
       piece.period_s = m.period_s;
       if (p > 0) {
+        piece.continues = true;
         piece.timing = SetpointSegment::Timing::append;
         piece.blend_s = 0.0;
         piece.start_s = 0.0;
@@ -168,9 +169,11 @@ Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& li
   if (!in_range(lo, hi))
     return reject(RejectReason::out_of_range, "the segment spans %.6g..%.6g %s, outside %.6g..%.6g", lo, hi, range.unit,
                   range.min, range.max);
-  if (slope > range.max_slope)
+  // Per loop cycle the envelope allows min(max_step, max_slope * period): a segment must fit both.
+  const double max_slope = std::min(range.max_slope, range.max_step / loop.period_s);
+  if (slope > max_slope)
     return reject(RejectReason::slope_too_large, "the segment changes at up to %.6g %s/s (limit %.6g)", slope, range.unit,
-                  range.max_slope);
+                  max_slope);
   seg.count = static_cast<int>(n);
   std::copy(m.values.begin(), m.values.end(), seg.values.begin());
   if (kind == Kind::ramp) {

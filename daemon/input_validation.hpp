@@ -36,6 +36,7 @@ enum class RejectReason : std::uint8_t {
   unknown_command,    ///< command kind not known
   bad_argument,       ///< command argument out of range
   other_rig,          ///< addressed to another rig (counted, never answered)
+  busy,               ///< back-pressure: the queue already reaches max_lead_s ahead; send again later (not counted as a rejection)
   count_
 };
 

@@ -36,8 +36,10 @@ struct LoopInput {
 struct LoopOutcome {
   std::uint32_t ticket = 0;
   RejectReason reason = RejectReason::accepted;
-  /// For refusals: the state the loop was in.
+  /// For refusals: the state the loop was in, and the fault whose cause is
+  /// still present (an arm refused because of it).
   std::uint8_t state = 0;
+  std::uint8_t cause = 0;
 };
 
 /// What the DDS thread needs to know about the loop, every cycle.

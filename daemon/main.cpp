@@ -44,6 +44,8 @@ int run(const Options& opt) {
   if (!std::isnan(opt.duration)) cfg.duration_s = opt.duration;
   const bool has_trajectory = !cfg.trajectory.empty();
   const Trajectory trajectory = Trajectory::parse(has_trajectory ? cfg.trajectory : "hold:0");
+  // A local trajectory passes the same [setpoints] checks as one received over DDS (and the envelope at play time).
+  if (has_trajectory) trajectory.check_limits(cfg.setpoint_limits);
   control::Controller controller(cfg.rig.model, cfg.rig.controller);
   auto sim = std::make_unique<hal::SimBackend>(cfg.rig.sim);
   if (!opt.inject.empty()) {
@@ -51,7 +53,8 @@ int run(const Options& opt) {
     const auto kind = hal::parse_sim_fault(opt.inject.substr(0, at));
     if (!kind || at == std::string::npos)
       throw control::ConfigError("--inject-fault", "expected KIND@SECONDS with KIND one of sensor_nan, sensor_stuck, "
-                                                   "sensor_out_of_range, sensor_dropout, amplifier_fault; got '" +
+                                                   "sensor_out_of_range, sensor_dropout, amplifier_fault, write_failed, "
+                                                   "write_timeout, hv_enable_failed; got '" +
                                                        opt.inject + "'");
     const std::string when = opt.inject.substr(at + 1);
     double t_s = NAN;
@@ -70,6 +73,7 @@ int run(const Options& opt) {
   ControlLoop loop(hal, controller, trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
   loop.set_auto_start(has_trajectory);
   loop.set_exit_on_fault(std::isfinite(cfg.duration_s));
+  loop.set_limits(cfg.setpoint_limits);
   auto io = std::make_unique<LoopIo>();
   if (cfg.dds_enabled) loop.attach_io(*io, cfg.setpoint_limits);
 
@@ -151,7 +155,7 @@ int run(const Options& opt) {
   const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0;
   std::uint64_t last_cycles = 0;
   auto last_ping = std::chrono::steady_clock::now();
-  bool stop_sent = false;
+  bool stop_sent = false, signalled = false;
   LoopState last_state = LoopState::disabled;
   FaultReason last_fault = FaultReason::none;
   auto last_status = last_ping;
@@ -167,14 +171,14 @@ int run(const Options& opt) {
       stop_sent = true;
     }
     if (sig == SIGUSR1) {
-      std::cerr << "pvcgeld: SIGUSR1: fault reset requested\n";
+      std::cerr << "pvcgeld: SIGUSR1: fault reset requested (FAULT -> DISABLED, high voltage off; arm again explicitly)\n";
       loop.request_reset();
     }
     if ((sig == SIGTERM || sig == SIGINT) && !stop_sent) {
       std::cerr << "pvcgeld: " << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ": ramping down\n";
       sd_notify(0, "STOPPING=1");
       loop.request_stop();
-      stop_sent = true;
+      stop_sent = signalled = true;
     }
     const auto now = std::chrono::steady_clock::now();
     // Log state changes as they happen (the RT thread itself never logs).
@@ -221,8 +225,14 @@ int run(const Options& opt) {
   if (recorder)
     std::fprintf(stderr, "; recorded %llu rows to %s (sequence gaps %llu)", static_cast<unsigned long long>(recorder->rows()),
                  opt.record.c_str(), static_cast<unsigned long long>(recorder->gaps()));
+  std::fprintf(stderr, "; actuator failures %llu, envelope acted on reference %llu / output %llu cycles",
+               static_cast<unsigned long long>(loop.actuator_failures()),
+               static_cast<unsigned long long>(loop.envelope().reference_limited_cycles()),
+               static_cast<unsigned long long>(loop.envelope().output().limited_cycles()));
   std::fprintf(stderr, "; hal %s: %s\n", hal.name().data(), health_summary(hal.health()).c_str());
-  return loop.state() == LoopState::fault ? kExitFault : kExitOk;
+  // Asked to stop (SIGTERM/SIGINT) the daemon did what it was told: exit 0 even when it was waiting in FAULT
+  // (the fault is logged above); a run that ends in FAULT by itself exits 3.
+  return loop.state() == LoopState::fault && !signalled ? kExitFault : kExitOk;
 }
 
 }  // namespace

@@ -58,9 +58,15 @@ bool SetpointSchedule::add(const SetpointSegment& in, double now_s, double curre
   if (size_ == kCapacity) return false;
   double from = current_value;
   if (seg.start_s > now_s) value_at(seg.start_s - 1e-9, from);
-  Slot& slot = at(size_);
-  slot.seg = seg;
-  slot.blend_from = from;
+  Slot slot{seg, from, seg.start_s, seg.blend_s};
+  if (seg.continues && size_ > 0) {
+    // Continue the chunk's blend across the piece boundary (it was cut after one piece before).
+    const Slot& prev = at(size_ - 1);
+    slot.blend_from = prev.blend_from;
+    slot.blend_start_s = prev.blend_start_s;
+    slot.blend_s = prev.blend_s;
+  }
+  at(size_) = slot;
   ++size_;
   return true;
 }
@@ -101,9 +107,9 @@ bool SetpointSchedule::value_at(double t_s, double& value) const noexcept {
   if (i < 0) return false;
   const auto& slot = at(i);
   double v = raw_value(i, t_s);
-  const double since = t_s - slot.seg.start_s;
-  if (slot.seg.blend_s > 0.0 && since < slot.seg.blend_s) {
-    const double s = 0.5 * (1.0 - std::cos(std::numbers::pi * since / slot.seg.blend_s));
+  const double since = t_s - slot.blend_start_s;
+  if (slot.blend_s > 0.0 && since < slot.blend_s) {
+    const double s = 0.5 * (1.0 - std::cos(std::numbers::pi * since / slot.blend_s));
     v = slot.blend_from + (v - slot.blend_from) * s;
   }
   value = v;

@@ -37,6 +37,9 @@ struct SetpointSegment {
   double end_s = std::numeric_limits<double>::infinity();
   double period_s = 0.0;  ///< samples only
   double blend_s = 0.0;   ///< raised-cosine blend from the setpoint in force when it starts
+  /// A later piece of the same chunk (appended contiguously): it continues the
+  /// chunk's blend, so a blend longer than one piece is one continuous curve.
+  bool continues = false;
   int count = 0;          ///< values used
   /// samples: the setpoints; hold: [level]; ramp: [from, to, ramp_time_s]; sine and multisine:
   /// [offset, a1, f1_Hz, phi1_rad, ...].
@@ -73,6 +76,8 @@ class SetpointSchedule final {
   struct Slot {
     SetpointSegment seg;
     double blend_from = 0.0;
+    double blend_start_s = 0.0;  // where the chunk's blend began (its first piece's start)
+    double blend_s = 0.0;        // the chunk's blend length
   };
   [[nodiscard]] const Slot& at(int i) const noexcept { return slots_[static_cast<std::size_t>((head_ + i) % kCapacity)]; }
   Slot& at(int i) noexcept { return slots_[static_cast<std::size_t>((head_ + i) % kCapacity)]; }

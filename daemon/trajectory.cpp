@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
+#include <numbers>
 #include <sstream>
 
 #include "control/config_error.hpp"
@@ -89,6 +91,7 @@ Trajectory Trajectory::parse(std::string_view spec_view) {
         throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": time must increase strictly");
       t.t_.push_back(v[0]);
       t.r_.push_back(v[1]);
+      t.line_.push_back(lineno);
     }
     if (t.t_.size() < 2) throw ConfigError("trajectory", args + ": needs at least 2 samples");
     if (t.t_.front() != 0.0) throw ConfigError("trajectory", args + ": the first sample must be at t_s = 0");
@@ -98,6 +101,37 @@ Trajectory Trajectory::parse(std::string_view spec_view) {
   throw ConfigError("trajectory", "unknown trajectory '" + spec +
                                       "' (hold:, sine:, multisine:, csv:, paper-0.1hz, paper-0.5hz, "
                                       "paper-1hz, paper-multi)");
+}
+
+void Trajectory::check_limits(const SetpointLimits& l) const {
+  char buf[200];
+  const auto refuse = [&](const std::string& where, const char* what, double value, double limit) {
+    std::snprintf(buf, sizeof buf, "%s %.6g is beyond the [setpoints] limit %.6g", what, value, limit);
+    throw ConfigError("trajectory", where + buf);
+  };
+  if (t_.empty()) {
+    double amplitude = 0.0, slope = 0.0;
+    for (int i = 0; i < analytic_.n_tones; ++i) {
+      const auto& tone = analytic_.tones[static_cast<size_t>(i)];
+      amplitude += std::abs(tone.amplitude_um);
+      slope += 2.0 * std::numbers::pi * tone.frequency_Hz * std::abs(tone.amplitude_um);
+    }
+    if (analytic_.offset_um + amplitude > l.max_um) refuse("'" + spec_ + "': ", "maximum (um)", analytic_.offset_um + amplitude, l.max_um);
+    if (analytic_.offset_um - amplitude < l.min_um) refuse("'" + spec_ + "': ", "minimum (um)", analytic_.offset_um - amplitude, l.min_um);
+    if (slope > l.max_slope_um_per_s) refuse("'" + spec_ + "': ", "peak slope (um/s)", slope, l.max_slope_um_per_s);
+    return;
+  }
+  const std::string file = spec_.substr(spec_.find(':') + 1);
+  for (size_t i = 0; i < t_.size(); ++i) {
+    const std::string where = file + ":" + std::to_string(line_[i]) + ": ";
+    if (r_[i] > l.max_um) refuse(where, "r_um", r_[i], l.max_um);
+    if (r_[i] < l.min_um) refuse(where, "r_um", r_[i], l.min_um);
+    if (i == 0) continue;
+    const double step = std::abs(r_[i] - r_[i - 1]);
+    if (step > l.max_step_um) refuse(where, "step from the sample before (um)", step, l.max_step_um);
+    if (step / (t_[i] - t_[i - 1]) > l.max_slope_um_per_s)
+      refuse(where, "slope (um/s)", step / (t_[i] - t_[i - 1]), l.max_slope_um_per_s);
+  }
 }
 
 double Trajectory::at(double time) const noexcept {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "control/reference_signal.hpp"
+#include "daemon/input_validation.hpp"
 
 namespace pvcgel::daemon {
 
@@ -21,6 +22,11 @@ class Trajectory final {
   /// @throws control::ConfigError (key "trajectory") naming the spec, file and line at fault.
   static Trajectory parse(std::string_view spec);
 
+  /// Refuses a trajectory the `[setpoints]` limits would refuse over DDS: range,
+  /// step between samples, slope. @throws control::ConfigError (key "trajectory")
+  /// naming the value, the limit and (CSV) the file and line.
+  void check_limits(const SetpointLimits& limits) const;
+
   /// r(t) in um; t may exceed the end (the last value is held). Real-time safe.
   [[nodiscard]] double at(double t_s) const noexcept;
   /// Time after which the source has no new samples (infinite for analytic ones).
@@ -32,6 +38,7 @@ class Trajectory final {
   std::string spec_;
   control::MultiSine analytic_{};
   std::vector<double> t_, r_;  // CSV samples (filled at configuration time only)
+  std::vector<int> line_;      // CSV line of each sample
   double end_s_ = std::numeric_limits<double>::infinity();
 };
 

@@ -217,7 +217,7 @@ void ModbusBackend::measure_round_trip() {
   }
 }
 
-HalStatus ModbusBackend::transaction_failed(int rc) noexcept {
+HalStatus ModbusBackend::transaction_failed(int rc, int& consecutive_failures) noexcept {
   const int e = rc < 0 ? errno : EMBMDATA;
   HalStatus status = HalStatus::invalid_reply;
   bool reset_link = false;
@@ -243,8 +243,8 @@ HalStatus ModbusBackend::transaction_failed(int rc) noexcept {
   } else {
     reset_link = true;  // socket or device error: the link is gone
   }
-  if (reset_link || ++consecutive_failures_ >= config_.reconnect_after_failures) {
-    consecutive_failures_ = 0;
+  if (reset_link || ++consecutive_failures >= config_.reconnect_after_failures) {
+    read_failures_ = write_failures_ = 0;
     // A lost link counts as an interlock trip: whatever the loop still commands
     // (a ramp-down), after reconnecting the register stays at 0 V until re-armed.
     hv_enabled_ = false;
@@ -261,8 +261,8 @@ HalStatus ModbusBackend::read_displacement(double& y_um) noexcept {
   if (link_.load(std::memory_order_acquire) != Link::up) return HalStatus::disconnected;
   flush_if_pending();
   const int rc = read_block();
-  if (rc != block_count_) return transaction_failed(rc);
-  consecutive_failures_ = 0;
+  if (rc != block_count_) return transaction_failed(rc, read_failures_);
+  read_failures_ = 0;  // reads only: a module that answers reads but fails writes must still reach the threshold
   y_um = config_.sensor.decode(block_, block_start_);
   check_monitors();
   return HalStatus::ok;
@@ -292,8 +292,8 @@ HalStatus ModbusBackend::write_voltage(double voltage_V) noexcept {
   if (hv_enabled_) config_.amplifier.output_to_counts(voltage_V, counts);
   flush_if_pending();
   const int rc = write_counts(counts);
-  if (rc != 1) return transaction_failed(rc < 0 ? rc : 0);
-  consecutive_failures_ = 0;
+  if (rc != 1) return transaction_failed(rc < 0 ? rc : 0, write_failures_);
+  write_failures_ = 0;
   last_output_V_ = config_.amplifier.counts_to_output(counts);
   if (amplifier_fault_) {
     device_faults_.fetch_add(1, std::memory_order_relaxed);
@@ -318,7 +318,7 @@ HalStatus ModbusBackend::set_high_voltage(bool enabled) noexcept {
   if (up) {
     flush_if_pending();
     const int rc = write_zero();
-    if (rc != 1) return transaction_failed(rc < 0 ? rc : 0);
+    if (rc != 1) return transaction_failed(rc < 0 ? rc : 0, write_failures_);
     last_output_V_ = 0.0;
   }
   return HalStatus::ok;
@@ -366,7 +366,7 @@ void ModbusBackend::supervise() {
     set_cycle_timeout();
     if (zero_written) {
       flush_pending_ = false;
-      consecutive_failures_ = 0;
+      read_failures_ = write_failures_ = 0;
       wait = min_wait;
       reconnects_.fetch_add(1, std::memory_order_relaxed);
       link_.store(Link::up, std::memory_order_release);

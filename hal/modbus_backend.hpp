@@ -108,7 +108,9 @@ class ModbusBackend final : public Hal {
   static constexpr std::uint32_t kFirstContactTimeout_s = 1;  ///< first write after (re)connecting
   static constexpr int kLateReplyWindow = 4;  ///< transactions after a timeout in which a mismatched reply counts as late
 
-  HalStatus transaction_failed(int rc) noexcept;
+  /// Counts a failed transaction in `consecutive_failures` (reads and writes
+  /// separately) and hands the link to the supervisor at the threshold.
+  HalStatus transaction_failed(int rc, int& consecutive_failures) noexcept;
   void set_cycle_timeout() noexcept;
   void flush_if_pending() noexcept;
   int read_block() noexcept;
@@ -129,7 +131,7 @@ class ModbusBackend final : public Hal {
   // RT-thread state.
   bool hv_enabled_ = false;
   double last_output_V_ = 0.0;
-  int consecutive_failures_ = 0;
+  int read_failures_ = 0, write_failures_ = 0;  // failed transactions in a row, per direction
   bool flush_pending_ = false;  // a timed-out or garbled reply may still be on its way
   int since_timeout_ = kLateReplyWindow;  // RT transactions since the last timeout
   int monitor_mismatches_ = 0;

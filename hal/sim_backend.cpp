@@ -7,7 +7,8 @@ namespace pvcgel::hal {
 
 namespace {
 constexpr std::string_view kFaultNames[] = {"none", "sensor_nan", "sensor_stuck", "sensor_out_of_range",
-                                            "sensor_dropout", "amplifier_fault"};
+                                            "sensor_dropout", "amplifier_fault", "write_failed",
+                                            "write_timeout", "hv_enable_failed"};
 }
 
 std::optional<SimFault> parse_sim_fault(std::string_view name) noexcept {
@@ -48,19 +49,35 @@ HalStatus SimBackend::read_displacement(double& y) noexcept {
 
 HalStatus SimBackend::write_voltage(double v) noexcept {
   writes_.fetch_add(1, std::memory_order_relaxed);
-  const bool amp_fault = fault_.load(std::memory_order_relaxed) == SimFault::amplifier_fault;
+  const SimFault fault = fault_.load(std::memory_order_relaxed);
+  const bool amp_fault = fault == SimFault::amplifier_fault;
+  const bool write_lost = fault == SimFault::write_failed || fault == SimFault::write_timeout;
   amp_fault_flag_.store(amp_fault, std::memory_order_relaxed);
+  // A lost write leaves the amplifier at its last command (as an analog output module does).
+  if (!write_lost) applied_V_ = v;
   // A faulted or disabled amplifier outputs nothing; the plant still evolves.
-  rig_.apply(hv_enabled_ && !amp_fault ? v : 0.0);
+  rig_.apply(hv_enabled_ && !amp_fault ? applied_V_ : 0.0);
   ++samples_;
   if (amp_fault) {
     device_faults_.fetch_add(1, std::memory_order_relaxed);
     return HalStatus::device_fault;
   }
+  if (fault == SimFault::write_timeout) {
+    timeouts_.fetch_add(1, std::memory_order_relaxed);
+    return HalStatus::timeout;
+  }
+  if (fault == SimFault::write_failed) {
+    invalid_.fetch_add(1, std::memory_order_relaxed);
+    return HalStatus::invalid_reply;
+  }
   return HalStatus::ok;
 }
 
 HalStatus SimBackend::set_high_voltage(bool enabled) noexcept {
+  if (enabled && fault_.load(std::memory_order_relaxed) == SimFault::hv_enable_failed) {
+    device_faults_.fetch_add(1, std::memory_order_relaxed);
+    return HalStatus::device_fault;  // the enable did not take: high voltage stays off
+  }
   hv_enabled_ = enabled;
   hv_flag_.store(enabled, std::memory_order_relaxed);
   return HalStatus::ok;

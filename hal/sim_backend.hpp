@@ -20,6 +20,9 @@ enum class SimFault : std::uint8_t {
   sensor_out_of_range,  ///< the sensor returns an impossible displacement
   sensor_dropout,       ///< reads time out
   amplifier_fault,      ///< the amplifier reports a fault
+  write_failed,         ///< amplifier writes get an invalid reply; the amplifier keeps its last output
+  write_timeout,        ///< amplifier writes time out; the amplifier keeps its last output
+  hv_enable_failed,     ///< enabling high voltage fails (it stays off)
 };
 
 /// Parses "sensor_nan", ... ; empty when unknown.
@@ -59,6 +62,7 @@ class SimBackend final : public Hal {
   std::int64_t samples_ = 0;
   double last_reading_ = 0.0;
   bool hv_enabled_ = false;
+  double applied_V_ = 0.0;  // what the amplifier holds (a failed write leaves it)
   std::atomic<std::uint64_t> reads_{0}, writes_{0}, timeouts_{0}, invalid_{0}, device_faults_{0};
   std::atomic<bool> hv_flag_{false}, amp_fault_flag_{false};
 };

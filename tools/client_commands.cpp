@@ -20,6 +20,7 @@ namespace pvcgel::tools {
 namespace {
 
 using daemon::CommandKind;
+using daemon::LoopState;
 
 volatile std::sig_atomic_t g_interrupted = 0;
 
@@ -79,6 +80,17 @@ struct SendArgs {
 };
 
 /// Arm and start when the rig is not running yet.
+/// The states a command leads to (FAULT too: the loop may fault meanwhile).
+bool reached(CommandKind kind, LoopState s) {
+  switch (kind) {
+    case CommandKind::arm: return s == LoopState::armed || s == LoopState::fault;
+    case CommandKind::start: return s == LoopState::running || s == LoopState::ramp_down || s == LoopState::fault;
+    case CommandKind::stop: return s != LoopState::running && s != LoopState::armed;
+    case CommandKind::reset: return s != LoopState::fault;
+    default: return true;
+  }
+}
+
 void ensure_running(DdsClient& c) {
   const auto state = static_cast<daemon::LoopState>(c.status().state);
   if (state == daemon::LoopState::running) return;
@@ -193,7 +205,7 @@ void send(DdsClient& c, SendArgs a) {
       auto t = make_trajectory(piece, 0, chunk);
       t.period_s = period;
       const Reply r = c.send(t, false);
-      if (r.reason == daemon::RejectReason::too_far_ahead) {
+      if (r.reason == daemon::RejectReason::busy) {
         // Back-pressure: the daemon holds max_lead_s of setpoints; wait for it to play some.
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         continue;
@@ -271,12 +283,19 @@ void add_client_commands(CLI::App& app) {
       run_client([&] {
         DdsClient c(*opt);
         c.connect();
+        if (kind == CommandKind::start && static_cast<LoopState>(c.status().state) == LoopState::running) {
+          std::printf("rig %s: already RUNNING; start not sent\n", opt->rig.c_str());
+          return;
+        }
         if (kind == CommandKind::start) {
           ensure_running(c);
         } else {
           c.command(kind);
         }
-        std::printf("rig %s: %s accepted; now %s\n", opt->rig.c_str(), name, state_line(c.status()).c_str());
+        // Print the state the command led to, not the Status that was current when the reply came.
+        const auto& s = c.wait_status([kind](const pvcgel_v1_Status& st) { return reached(kind, static_cast<LoopState>(st.state)); },
+                                      opt->wait_s);
+        std::printf("rig %s: %s accepted; now %s\n", opt->rig.c_str(), name, state_line(s).c_str());
       });
     });
   };

@@ -154,6 +154,17 @@ const pvcgel_v1_Status& DdsClient::fresh_status() {
   return *status_;
 }
 
+const pvcgel_v1_Status& DdsClient::wait_status(const std::function<bool(const pvcgel_v1_Status&)>& done,
+                                                double timeout_s) {
+  const auto deadline = Clock::now() + std::chrono::duration<double>(timeout_s);
+  poll_status();
+  while (!done(*status_) && Clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    poll_status();
+  }
+  return *status_;
+}
+
 void DdsClient::ensure_writers() {
   if (command_writer_.get() != 0) return;
   if (!status_) connect();

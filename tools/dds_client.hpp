@@ -70,6 +70,9 @@ class DdsClient final {
   const pvcgel_v1_Status& connect();
   /// A Status published after this client matched the daemon (waits up to 1.5 s).
   const pvcgel_v1_Status& fresh_status();
+  /// Wait (up to `timeout_s`) for a Status for which `done` holds, e.g. the
+  /// state a command leads to; returns the latest Status either way.
+  const pvcgel_v1_Status& wait_status(const std::function<bool(const pvcgel_v1_Status&)>& done, double timeout_s);
   /// Latest Status of the rig (call connect() first); refreshed by every wait.
   const pvcgel_v1_Status& status();
   /// Send a command and wait for its reply. @throws Rejected, std::runtime_error (no reply).
