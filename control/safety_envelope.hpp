@@ -68,7 +68,7 @@ class RateGovernor final {
 /// amplifier's voltage range and slew.
 struct SafetyEnvelopeConfig {
   EnvelopeLimits displacement_um{0.0, 300.0, 2.0, 500.0};
-  EnvelopeLimits voltage_setpoint_V{0.0, 1000.0, 20.0, 30000.0};
+  EnvelopeLimits voltage_setpoint_V{0.0, 1000.0, 30.0, 30000.0};
   double voltage_min_V = 0.0, voltage_max_V = 1000.0;
   double slew_V_per_s = 30000.0;  ///< the amplifier's rating (0 is refused at configuration)
 };

@@ -49,7 +49,7 @@ struct SetpointLimits {
   double max_step_um = 2.0;                      ///< largest jump without a blend
   double max_slope_um_per_s = 500.0;
   double min_V = 0.0, max_V = 1000.0;            ///< open-loop voltage setpoint range (then clamped again)
-  double max_step_V = 20.0;
+  double max_step_V = 30.0;                      ///< per sample; 30 V = 30 kV/s for one 1 ms cycle
   double max_slope_V_per_s = 30000.0;
   double max_lead_s = 10.0;                      ///< how far ahead of now a segment may start / the queue may reach
   double past_tolerance_s = 0.05;                ///< how late an absolute start may be

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 
 namespace pvcgel::tools {
 
@@ -26,6 +27,22 @@ bool to_number(const std::string& s, double& v) {
   const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
   return ec == std::errc() && p == s.data() + s.size();
 }
+/// A finite but impossible u_V or y_um is a corrupt file, not a measurement: name it.
+void check_physical(const std::string& path, const std::vector<std::string>& names,
+                    const std::vector<std::vector<std::string>>& cells, const std::vector<int>& line_of_row) {
+  for (const auto& [column, bound, unit] : {std::tuple{"u_V", kMaxPhysicalVoltage_V, "V"},
+                                            std::tuple{"y_um", kMaxPhysicalDisplacement_um, "um"}}) {
+    const auto c = static_cast<std::size_t>(std::find(names.begin(), names.end(), column) - names.begin());
+    for (std::size_t r = 0; r < cells.size(); ++r) {
+      double v = 0.0;
+      if (to_number(cells[r][c], v) && std::isfinite(v) && std::abs(v) > bound)
+        throw std::runtime_error(path + ":" + std::to_string(line_of_row[r]) + ": " + column + " = " + cells[r][c] +
+                                 " is not physical (|" + column + "| <= " + std::to_string(static_cast<long>(bound)) +
+                                 " " + unit + ")");
+    }
+  }
+}
+
 }  // namespace
 
 const std::vector<double>& Recording::col(const std::string& name) const {
@@ -46,6 +63,11 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
   std::vector<int> line_of_row;
   while (std::getline(in, line)) {
     ++lineno;
+    // A writer killed mid-line leaves a last line without its newline: skip and count it.
+    if (in.eof()) {
+      if (!names.empty() && !line.empty()) ++rec.truncated_rows;
+      break;
+    }
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty()) continue;
     if (line[0] == '#') {
@@ -75,6 +97,7 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
     line_of_row.push_back(lineno);
   }
   if (names.empty()) throw std::runtime_error(path + ": no header row");
+  check_physical(path, names, cells, line_of_row);
   if (cells.size() < 2) throw std::runtime_error(path + ": fewer than 2 data rows");
 
   for (size_t c = 0; c < names.size(); ++c) {

@@ -19,13 +19,16 @@ struct ShowArgs {
 };
 
 int show(const ShowArgs& a) {
-  const Recording rec = read_recording(a.path);
+  // Keep rows with a NaN reading (a faulted sensor): the summary must end at the true last row.
+  const Recording rec = read_recording(a.path, true);
   const auto& t = rec.col("t_s");
   const auto& u = rec.col("u_V");
   const auto& y = rec.col("y_um");
   const size_t n = t.size();
   std::printf("%s: %zu rows, %.3f s at %.0f Hz", a.path.c_str(), n, t.back() - t.front(), 1.0 / rec.sample_time_s);
   if (rec.skipped_rows) std::printf(" (%ld invalid rows skipped)", rec.skipped_rows);
+  if (rec.invalid_rows) std::printf(" (%ld rows with a non-finite reading)", rec.invalid_rows);
+  if (rec.truncated_rows) std::printf(" (last line cut, as a crash leaves it: %ld row skipped)", rec.truncated_rows);
   std::printf("\n");
   for (const auto& [k, v] : rec.header)
     if (k == "trajectory" || k == "mode" || k == "hal_backend" || k == "start_time") std::printf("  %s: %s\n", k.c_str(), v.c_str());
@@ -44,7 +47,7 @@ int show(const ShowArgs& a) {
       const bool running = !has_state || rec.text.at("state")[k] == "RUNNING";
       if (!running) continue;
       if (std::isnan(first_running)) first_running = t[k];
-      if (t[k] - first_running < settle) continue;
+      if (t[k] - first_running < settle || !std::isfinite(y[k])) continue;
       const double e = std::abs(r[k] - y[k]);
       sum += e;
       mx = std::max(mx, e);

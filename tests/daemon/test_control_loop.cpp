@@ -91,7 +91,7 @@ INSTANTIATE_TEST_SUITE_P(
                       FaultCase{hal::SimFault::amplifier_fault, FaultReason::amplifier_fault}),
     [](const auto& p) { return std::string(hal::to_string(p.param.injected)); });
 
-TEST(ControlLoop, ExplicitResetLeavesFaultAndRunsAgain) {
+TEST(ControlLoop, ExplicitResetLeavesFaultForDisabledAndNeverRestartsByItself) {
   Rig rig;
   rig.loop->set_exit_on_fault(false);  // a service waits in FAULT for a reset
   rig.run(3.0);
@@ -104,12 +104,14 @@ TEST(ControlLoop, ExplicitResetLeavesFaultAndRunsAgain) {
   rig.sim.inject(hal::SimFault::none);
   rig.loop->request_reset();
   r = rig.run(0.01);
-  EXPECT_NE(r.state, LoopState::fault);
+  EXPECT_EQ(r.state, LoopState::disabled);
   EXPECT_EQ(r.fault, FaultReason::none);
+  // The local trajectory had auto-start: a reset must still not re-arm or replay it.
   r = rig.run(5.0);
-  EXPECT_EQ(r.state, LoopState::running);
-  EXPECT_TRUE(rig.sim.health().high_voltage_enabled);
-  EXPECT_LT(std::abs(r.e_um), 2.5) << "tracking again after the soft start";
+  EXPECT_EQ(r.state, LoopState::disabled);
+  EXPECT_FALSE(r.high_voltage);
+  EXPECT_FALSE(rig.sim.health().high_voltage_enabled);
+  EXPECT_EQ(r.u_V, 0.0);
 }
 
 TEST(ControlLoop, ResetIsIgnoredOutsideFault) {

@@ -108,6 +108,74 @@ TEST(LoopCommands, ArmStartStopResetFollowTheStateMachineAndIllegalOnesAreRefuse
   EXPECT_FALSE(r.last.high_voltage);
 }
 
+TEST(LoopCommands, ArmIsRefusedWhileTheFaultsCauseIsPresentAndNamesIt) {
+  Rig r;
+  r.command(CommandKind::arm);
+  r.command(CommandKind::start);
+  r.run(600);
+  r.sim.inject(hal::SimFault::amplifier_fault);
+  r.run(2000);
+  ASSERT_EQ(r.loop->state(), LoopState::fault);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::reset)), RejectReason::accepted);
+  r.run(5);
+  EXPECT_EQ(r.loop->state(), LoopState::disabled) << "DDS reset: FAULT -> DISABLED";
+  EXPECT_FALSE(r.sim.health().high_voltage_enabled);
+  const auto t = r.command(CommandKind::arm);
+  r.run(1);
+  bool seen = false;
+  while (auto o = r.io->outcomes.pop()) {
+    if (o->ticket != t) continue;
+    seen = true;
+    EXPECT_EQ(o->reason, RejectReason::illegal_in_state);
+    EXPECT_EQ(static_cast<FaultReason>(o->cause), FaultReason::amplifier_fault) << "the refusal names the cause";
+  }
+  EXPECT_TRUE(seen);
+  r.run(100);
+  EXPECT_EQ(r.loop->state(), LoopState::disabled);
+  EXPECT_FALSE(r.last.high_voltage);
+  r.sim.inject(hal::SimFault::none);
+  r.run(2);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::arm)), RejectReason::accepted) << "cause gone: arming is allowed again";
+}
+
+TEST(LoopCommands, ABlendLongerThanOnePieceIsOneContinuousCurve) {
+  // The case: a 2 s blend on a chunk of samples cut into 128-sample pieces.
+  Rig r;
+  r.command(CommandKind::arm);
+  r.command(CommandKind::start);
+  r.run(600);
+  EXPECT_EQ(r.outcome(r.segment(hold_now(80.0, 1.0))), RejectReason::accepted);
+  r.run(1500);
+  ASSERT_NEAR(r.last.r_um, 80.0, 1e-9);
+  for (int p = 0; p < 16; ++p) {  // 2048 samples of 100 um
+    SetpointSegment s = hold_now(100.0, p == 0 ? 2.0 : 0.0);
+    s.kind = SetpointSegment::Kind::samples;
+    s.count = SetpointSegment::kMaxValues;
+    s.period_s = 1e-3;
+    for (int i = 0; i < s.count; ++i) s.values[static_cast<size_t>(i)] = 100.0;
+    s.timing = p == 0 ? SetpointSegment::Timing::now : SetpointSegment::Timing::append;
+    s.continues = p > 0;
+    s.start_s = 0.0;
+    s.end_s = s.count * s.period_s;
+    LoopInput in;
+    in.type = LoopInput::Type::segment;
+    in.segment = s;
+    in.ticket = r.ticket + 1;
+    in.last_piece = p == 15;
+    ASSERT_TRUE(r.io->inputs.push(in));
+  }
+  ++r.ticket;
+  double r_prev = r.last.r_um, max_dr = 0.0;
+  for (int k = 0; k < 2100; ++k) {
+    r.run(1);
+    max_dr = std::max(max_dr, std::abs(r.last.r_um - r_prev));
+    r_prev = r.last.r_um;
+  }
+  // A raised cosine over 20 um in 2 s peaks at pi 20 / (2 * 2) = 15.7 um/s: 0.0157 um per cycle.
+  EXPECT_LT(max_dr, 0.0160) << "no step at a piece boundary";
+  EXPECT_NEAR(r.last.r_um, 100.0, 1e-6);
+}
+
 TEST(LoopCommands, SetpointsArePlayedAtTheirTimestampsWithPreview) {
   Rig r;
   r.command(CommandKind::arm);

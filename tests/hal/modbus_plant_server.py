@@ -14,7 +14,9 @@ so it needs no timer thread.
 
 Test hooks: --journal FILE logs input-register reads ("R 4 addr count") and holding-register
 writes ("W addr value...") in order, flushed per line (pymodbus' read-back of a written register
-for its reply is not logged); SIGUSR1 toggles a response delay of --slow-ms before every read; --unit sets the one unit id
+for its reply is not logged); SIGUSR1 toggles a response delay of --slow-ms before every read; SIGUSR2 toggles refusing
+writes to the amplifier register with an exception (reads still answered: a module whose output
+stage failed); --unit sets the one unit id
 served (other ids get a gateway exception over TCP, silence over RTU).
 Run with /usr/bin/python3 (Debian's python3-pymodbus 3.0).
 """
@@ -111,6 +113,19 @@ class HoldingBlock(ModbusSequentialDataBlock):
             self.plant.u_V = self.values[AMP_REGISTER] * AMP_INPUT_V_PER_COUNT * AMP_GAIN
 
 
+class SlaveContext(ModbusSlaveContext):
+    """Refuses writes (function codes 6 and 16) that touch the amplifier register while state["refuse_writes"]."""
+
+    def __init__(self, state, **kwargs):
+        super().__init__(**kwargs)
+        self.state = state
+
+    def validate(self, fc_as_hex, address, count=1):
+        if self.state["refuse_writes"] and fc_as_hex in (6, 16) and address <= AMP_REGISTER < address + count:
+            return False  # answered with an exception (illegal data address)
+        return super().validate(fc_as_hex, address, count)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--transport", choices=["tcp", "rtu"], default="tcp")
@@ -137,15 +152,19 @@ def main():
             pass
     plant = Plant(args.noise_um)
     journal = Journal(args.journal)
-    state = {"slow": False, "slow_ms": args.slow_ms}
-    store = ModbusSlaveContext(di=ModbusSequentialDataBlock(0, [0] * 16), co=ModbusSequentialDataBlock(0, [0] * 16),
+    state = {"slow": False, "slow_ms": args.slow_ms, "refuse_writes": False}
+    store = SlaveContext(state, di=ModbusSequentialDataBlock(0, [0] * 16), co=ModbusSequentialDataBlock(0, [0] * 16),
                                hr=HoldingBlock(plant, journal), ir=InputBlock(plant, journal, state), zero_mode=True)
     context = ModbusServerContext(slaves={args.unit: store}, single=False)
 
     def toggle_slow(*_):
         state["slow"] = not state["slow"]
 
+    def toggle_refuse_writes(*_):
+        state["refuse_writes"] = not state["refuse_writes"]
+
     signal.signal(signal.SIGUSR1, toggle_slow)
+    signal.signal(signal.SIGUSR2, toggle_refuse_writes)
     signal.signal(signal.SIGTERM, lambda *_: os._exit(0))
 
     async def run():

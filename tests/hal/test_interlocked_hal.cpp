@@ -189,10 +189,10 @@ TEST(InterlockLogic, TheControlLoopFaultsWithinOneCycleOfAnEdgeAndTheLineIsOffBe
   EXPECT_FALSE(lines.enable_writes.back()) << "HV enable dropped before the ramp, not after it";
   for (int k = 0; k < 3000 && loop.state() != daemon::LoopState::fault; ++k) loop.cycle(0.0f, 0);
   EXPECT_EQ(loop.state(), daemon::LoopState::fault);
-  // Reset with the e-stop still pressed: the loop re-arms, the interlock refuses, the loop faults again.
+  // Reset with the e-stop still pressed: DISABLED, never re-armed by itself, enable stays off.
   lines.estop = true;
   loop.request_reset();
   for (int k = 0; k < 50; ++k) loop.cycle(0.0f, 0);
   for (bool w : std::vector<bool>(lines.enable_writes.end() - 3, lines.enable_writes.end())) EXPECT_FALSE(w);
-  EXPECT_NE(loop.state(), daemon::LoopState::running);
+  EXPECT_EQ(loop.state(), daemon::LoopState::disabled);
 }

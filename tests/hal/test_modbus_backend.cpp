@@ -262,6 +262,47 @@ TEST(ModbusBackend, MalformedRepliesAndExceptionsAreCountedAndTheLinkRecovers) {
   EXPECT_EQ(h.invalid_replies, h.exceptions + h.garbage_frames);
 }
 
+TEST(ModbusBackend, WritesRefusedButReadsAnsweredFaultTheLoopAndReachTheReconnectThreshold) {
+  // Issue 12, item 4: a module that answers reads but refuses writes to the
+  // amplifier register. The loop must fault at once (check_actuator) and the
+  // backend's failure count must not be reset by the successful reads.
+  PlantServer server({});
+  auto cfg = test::plant_modbus_config(server.port());
+  cfg.reconnect_after_failures = 5;
+  hal::ModbusBackend backend(cfg);
+  control::ControllerConfig cc;
+  cc.sample_time_s = 0.020;
+  cc.tuning->crossover_rad_s = 10.0;
+  control::Controller controller(control::paper_model(2), cc);
+  const auto trajectory = daemon::Trajectory::parse("hold:10");
+  daemon::SafetyConfig safety;
+  safety.soft_start_s = 0.1;
+  daemon::ControlLoop loop(backend, controller, trajectory, safety, 0.020, std::numeric_limits<double>::infinity());
+  loop.set_exit_on_fault(true);
+  for (int k = 0; k < 10; ++k) {
+    loop.cycle(0.0f, 0);
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_EQ(loop.state(), daemon::LoopState::running);
+  server.toggle_refuse_writes();
+  std::this_thread::sleep_for(50ms);  // let the signal land
+  daemon::CycleRecord first_faulted;
+  for (int k = 0; k < 100 && !loop.finished(); ++k) {
+    const auto rec = loop.cycle(0.0f, 0);
+    if (first_faulted.fault == daemon::FaultReason::none) first_faulted = rec;
+    std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_EQ(loop.fault(), daemon::FaultReason::actuator_write_failed);
+  EXPECT_EQ(first_faulted.fault, daemon::FaultReason::actuator_write_failed) << "the first refused write faults";
+  EXPECT_FALSE(first_faulted.high_voltage) << "high voltage off at once: the amplifier cannot be ramped";
+  EXPECT_EQ(loop.state(), daemon::LoopState::fault);
+  EXPECT_GE(loop.actuator_failures(), 1u);
+  EXPECT_GE(backend.counters().exceptions, 5u);
+  // Reads kept succeeding in between, yet the write failures reached the threshold.
+  EXPECT_GE(backend.counters().disconnects, 1u) << "write failures must count up despite successful reads";
+  server.toggle_refuse_writes();
+}
+
 TEST(ModbusBackend, SlowServerTimesOutWithinTheBudgetAndTheLoopFaultsAfterTheConfiguredCount) {
   PlantServer server({.slow_ms = 300.0});
   auto cfg = test::plant_modbus_config(server.port());  // 50 Hz: budget 12 ms, 6 ms per transaction

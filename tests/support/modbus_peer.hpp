@@ -187,6 +187,8 @@ class PlantServer {
   void kill() { child_.kill(); }
   /// Toggles the slow mode (every read delayed by slow_ms).
   void toggle_slow() const { child_.signal(SIGUSR1); }
+  /// Refuse (again: answer) writes to the amplifier register with an exception; reads stay answered.
+  void toggle_refuse_writes() const { child_.signal(SIGUSR2); }
   [[nodiscard]] int port() const { return options_.port; }
   [[nodiscard]] std::string errors() const { return slurp(stderr_path_); }
 
