@@ -1,5 +1,7 @@
 #include "control/config_parser.hpp"
 
+#include <sstream>
+
 #include "control/config_error.hpp"
 #include "control/toml_reader.hpp"
 
@@ -67,7 +69,8 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     cc.sample_time_s = c.number("period_s", cc.sample_time_s);
     // 10 us .. 100 ms: faster than any sensor here can answer, slower than the gel's dynamics allow.
     if (!(cc.sample_time_s >= 1e-5 && cc.sample_time_s <= 0.1))
-      throw ConfigError(c.key("period_s"), "must be in 1e-5..0.1 s (100 kHz .. 10 Hz), got " + std::to_string(cc.sample_time_s));
+      throw ConfigError(c.key("period_s"), "must be in 1e-5..0.1 s (100 kHz .. 10 Hz), got " +
+                                               (std::ostringstream() << cc.sample_time_s).str());
     cc.voltage_min_V = c.number("voltage_min_V", cc.voltage_min_V);
     cc.voltage_max_V = c.number("voltage_max_V", cc.voltage_max_V);
     cc.slew_limit_V_per_s = c.number("slew_limit_V_per_s", cc.slew_limit_V_per_s);

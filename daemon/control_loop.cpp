@@ -159,10 +159,11 @@ RejectReason ControlLoop::apply_segment(const LoopInput& in, LoopState state) no
   // chunk continue it (checked by the validator).
   if (state == LoopState::running && first_piece) {
     const double tail = schedule_.queued_until_s();
-    double start = seg.timing == SetpointSegment::Timing::at ? seg.start_s : now_s;
-    if (seg.timing == SetpointSegment::Timing::append && std::isfinite(tail) && tail > now_s) start = tail;
+    const bool after_tail = seg.timing == SetpointSegment::Timing::append && std::isfinite(tail) && tail > now_s;
+    const double start = seg.timing == SetpointSegment::Timing::at ? seg.start_s : now_s;
     double from = current;
-    if (start > now_s && !schedule_.value_at(start - 1e-9, from)) from = current;
+    if (after_tail) from = schedule_.tail_value();  // the curve it continues (a running blend carries on)
+    else if (start > now_s && !schedule_.value_at(start - 1e-9, from)) from = current;
     if (!start_step_allowed(seg, from, segment_value(seg, seg.start_s), limits_)) return RejectReason::step_too_large;
   }
   if (!schedule_.add(seg, now_s, current)) return RejectReason::queue_full;
@@ -349,12 +350,10 @@ bool ControlLoop::set_high_voltage(bool on, LoopState& state) noexcept {
   hv_disable_pending_ = !on && f != FaultReason::none;
   if (f == FaultReason::none) return true;
   if (on) hv_disable_pending_ = hal_.set_high_voltage(false) != hal::HalStatus::ok;  // undo the half-done arm
-  if (state == LoopState::fault || state == LoopState::disabled) {
-    pending_fault_ = f;
+  if (state == LoopState::fault) {
     fault_.store(f, std::memory_order_relaxed);
-    state = LoopState::fault;
   } else if (pending_fault_ == FaultReason::none) {
-    enter_ramp_down(f, state);
+    enter_ramp_down(f, state);  // through the ramp (immediate at 0 V) to FAULT, so a --duration run ends
   }
   return false;
 }

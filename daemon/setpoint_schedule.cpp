@@ -59,9 +59,13 @@ bool SetpointSchedule::add(const SetpointSegment& in, double now_s, double curre
   double from = current_value;
   if (seg.start_s > now_s) value_at(seg.start_s - 1e-9, from);
   Slot slot{seg, from, seg.start_s, seg.blend_s};
-  if (seg.continues && size_ > 0) {
-    // Continue the chunk's blend across the piece boundary (it was cut after one piece before).
-    const Slot& prev = at(size_ - 1);
+  const Slot* prev_slot = size_ > 0 ? &at(size_ - 1) : nullptr;
+  const bool blend_running = prev_slot && seg.timing == SetpointSegment::Timing::append && seg.blend_s <= 0.0 &&
+                             std::abs(prev_slot->seg.end_s - seg.start_s) < 1e-9 && prev_slot->blend_s > 0.0 &&
+                             prev_slot->blend_start_s + prev_slot->blend_s > seg.start_s;
+  if (prev_slot && (seg.continues || blend_running)) {
+    // Continue the blend across the piece (or chunk) boundary: it used to be cut after one piece, then step.
+    const Slot& prev = *prev_slot;
     slot.blend_from = prev.blend_from;
     slot.blend_start_s = prev.blend_start_s;
     slot.blend_s = prev.blend_s;
@@ -119,6 +123,11 @@ bool SetpointSchedule::value_at(double t_s, double& value) const noexcept {
 std::uint64_t SetpointSchedule::chunk_at(double t_s) const noexcept {
   const int i = find(t_s);
   return i < 0 ? 0 : at(i).seg.chunk_seq;
+}
+
+double SetpointSchedule::tail_value() const noexcept {
+  const auto& seg = at(size_ - 1).seg;
+  return segment_value(seg, std::isfinite(seg.end_s) ? seg.end_s - 1e-9 : seg.start_s);
 }
 
 double SetpointSchedule::queued_until_s() const noexcept {

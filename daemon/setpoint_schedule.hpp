@@ -39,6 +39,8 @@ struct SetpointSegment {
   double blend_s = 0.0;   ///< raised-cosine blend from the setpoint in force when it starts
   /// A later piece of the same chunk (appended contiguously): it continues the
   /// chunk's blend, so a blend longer than one piece is one continuous curve.
+  /// (An unblended chunk appended contiguously while a blend is still running
+  /// continues it too: a blend longer than a chunk is one curve as well.)
   bool continues = false;
   int count = 0;          ///< values used
   /// samples: the setpoints; hold: [level]; ramp: [from, to, ramp_time_s]; sine and multisine:
@@ -67,6 +69,9 @@ class SetpointSchedule final {
   bool value_at(double t_s, double& value) const noexcept;
   /// chunk_seq of the segment covering `t_s` (0: none).
   [[nodiscard]] std::uint64_t chunk_at(double t_s) const noexcept;
+  /// The last queued segment's own value at its end, without a blend (the
+  /// client's curve an appended chunk continues). Call only when not empty.
+  [[nodiscard]] double tail_value() const noexcept;
   /// Loop time up to which setpoints are queued (-inf when empty).
   [[nodiscard]] double queued_until_s() const noexcept;
   [[nodiscard]] int size() const noexcept { return size_; }

@@ -72,6 +72,13 @@ TEST(InputValidation, EachRuleRejectsWithItsReasonAndNamesTheValue) {
   auto ahead = f.msg(1, {50});
   ahead.start_time_s = 30.0;
   EXPECT_EQ(f.check(ahead).reason, RejectReason::too_far_ahead);
+  // Appending to a queue that already reaches max_lead_s ahead is back-pressure, not a bad chunk.
+  auto append = f.msg(1, {50});
+  append.timing = 1;
+  f.loop.queued_until_s = f.loop.now_s + f.limits.max_lead_s + 0.5;
+  EXPECT_EQ(f.check(append).reason, RejectReason::busy);
+  EXPECT_EQ(to_string(RejectReason::busy), "busy");
+  f.loop.queued_until_s = -1e300;
   f.limits.max_chunk_samples = 100;
   EXPECT_EQ(f.check(f.msg(0, std::vector<double>(101, 50.0))).reason, RejectReason::chunk_too_large);
   auto fast = f.msg(0, {50, 50});
