@@ -5,7 +5,7 @@
 // (>= 30 frames/s; < 25 % of one core together).
 //
 //   node benchmarks/bench_serve.mjs --pvcgeld build/daemon/pvcgeld --pvcgel build/tools/pvcgel \
-//        --source . --out build [--seconds 20]
+//        --source . --out build [--seconds 20] [--page-decimation N]
 import * as h from "../tests/tools/serve/harness.mjs";
 
 const a = h.args();
@@ -14,11 +14,13 @@ if (!h.findChromium() || !h.haveModule("chrome-remote-interface") || !h.pageModu
   h.skip("needs chromium and the npm modules (run .ci/install-deps)");
 
 const daemon = h.startDaemon(a, h.writeConfig(a.source, "bench", "paper-multi"));
-const serve = await h.startServe(a, ["--reliable-telemetry"]);
+const serve = await h.startServe(a, ["--reliable-telemetry", ...(a["page-decimation"] ? ["--page-decimation", a["page-decimation"]] : [])]);
 const browser = await h.startBrowser();
 try {
-  await browser.client.Page.navigate({ url: `http://127.0.0.1:${serve.port}/` });
-  await h.waitFor("the page to run", async () => (await h.evaluate(browser.client, "pvcgelStats.samples")) > 3000, 30000);
+  const loaded = browser.client.Page.loadEventFired();
+  await browser.client.Page.navigate({ url: `http://127.0.0.1:${serve.port}/${process.env.Q ?? ''}` });
+  await loaded;
+  await h.waitFor("the page to run", async () => (await h.evaluate(browser.client, "window.pvcgelStats?.samples ?? 0")) > 3000, 30000);
   await h.sleep(3000);  // past start-up
   const frames0 = await h.evaluate(browser.client, "pvcgelStats.frames");
   const samples0 = await h.evaluate(browser.client, "pvcgelStats.samples");

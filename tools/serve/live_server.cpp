@@ -68,6 +68,7 @@ class LiveServer final : public RigSink {
   };
 
   Rig& rig_locked(const std::string& id);
+  bool subscribed_locked(std::uint32_t channel) const;
   json channels_of(const Rig& rig) const;
   json services_of(const Rig& rig) const;
   void publish_locked(std::uint32_t channel, std::uint64_t log_time_ns, const std::string& payload, bool protocol);
@@ -207,16 +208,25 @@ void LiveServer::publish_locked(std::uint32_t channel, std::uint64_t log_time_ns
   }
 }
 
+bool LiveServer::subscribed_locked(std::uint32_t channel) const {
+  for (const auto& [id, c] : clients_)
+    for (const auto& [sub, ch] : c->subscriptions)
+      if (ch == channel) return true;
+  return false;
+}
+
 void LiveServer::on_telemetry(const pvcgel_v1_Telemetry& t) {
   std::lock_guard lock(mutex_);
   Rig& rig = rig_locked(t.rig_id);
-  const std::string payload = to_json(t).dump();
-  const std::uint32_t base = 1 + 8 * rig.index;
-  const auto stamp = static_cast<std::uint64_t>(t.stamp_ns);
-  publish_locked(base + telemetry, stamp, payload, false);
-  if (rig.decimation_count++ % static_cast<std::uint64_t>(opt_.foxglove_decimation) == 0)
-    publish_locked(base + telemetry_decimated, stamp, payload, false);
   rig.batcher.add(t);
+  const std::uint32_t base = 1 + 8 * rig.index;
+  const bool decimated = rig.decimation_count++ % static_cast<std::uint64_t>(opt_.foxglove_decimation) == 0;
+  const bool every = subscribed_locked(base + telemetry);
+  if (!every && !(decimated && subscribed_locked(base + telemetry_decimated))) return;  // nobody wants this sample alone
+  const std::string payload = to_json(t).dump();
+  const auto stamp = static_cast<std::uint64_t>(t.stamp_ns);
+  if (every) publish_locked(base + telemetry, stamp, payload, false);
+  if (decimated) publish_locked(base + telemetry_decimated, stamp, payload, false);
 }
 
 void LiveServer::on_status(const pvcgel_v1_Status& s) {
@@ -273,6 +283,7 @@ void LiveServer::on_open(Conn h) {
                   {"metadata",
                    {{"domain", std::to_string(opt_.dds.domain)},
                     {"allow_control", opt_.allow_control ? "true" : "false"},
+                    {"default_rig", opt_.dds.rig},
                     {"page_decimation", std::to_string(opt_.page_decimation)}}},
                   {"sessionId", session_id_}};
   send_protocol_locked(*c, info.dump(), false);

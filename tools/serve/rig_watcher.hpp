@@ -25,7 +25,7 @@ class RigSink {
   virtual void on_reply(const pvcgel_v1_CommandReply& r) = 0;
   /// A rig's daemon went quiet (`present` false: no Status for the timeout) or came back.
   virtual void on_presence(const std::string& rig, bool present) = 0;
-  /// Called about every 10 ms and after every burst of samples (batching, housekeeping).
+  /// Called after every burst of samples, at least every 15 ms (batching, housekeeping).
   virtual void on_tick() = 0;
 };
 

@@ -29,6 +29,7 @@ const plotInk = (client) => h.evaluate(client, `(() => {
 })()`);
 
 let daemon = h.startDaemon(a, config);
+const second = h.startDaemon(a, h.writeConfig(a.source, "second", null));  // an idle second rig for the picker
 const serve = await h.startServe(a, ["--allow-control", "--reliable-telemetry"]);
 const browser = await h.startBrowser();
 const { client } = browser;
@@ -40,6 +41,17 @@ try {
   h.check(true, `state text: ${await text(client, "state")}, mode ${await text(client, "mode")}, high voltage ${await text(client, "hv")}`);
   h.check(/cycles at 1000 Hz/.test(await text(client, "loop")), `loop statistics from Status: ${await text(client, "loop")}`);
   h.check(await h.evaluate(client, `!document.getElementById('controls').hidden`), "control buttons shown (server allows control)");
+  const rigs = await h.waitFor("both rigs in the picker", async () => {
+    const r = await h.evaluate(client, `[...document.getElementById('rig').options].map((o) => o.value).join(",")`);
+    return r.split(",").length === 2 ? r : null;
+  }, 10000);
+  h.check(rigs === "browser,second", `rig picker lists both rigs (${rigs})`);
+  await h.evaluate(client, `(() => { const p = document.getElementById('rig'); p.value = 'second'; p.dispatchEvent(new Event('change')); })()`);
+  await h.waitFor("the second rig's state DISABLED", async () => (await text(client, "state")) === "DISABLED", 5000);
+  h.check(true, "picking the idle second rig shows its state: DISABLED");
+  await h.stop(second, "SIGTERM");
+  await h.evaluate(client, `(() => { const p = document.getElementById('rig'); p.value = 'browser'; p.dispatchEvent(new Event('change')); })()`);
+  await h.waitFor("RUNNING again on the first rig", async () => (await text(client, "state")) === "RUNNING", 5000);
   const n0 = await samples(client);
   await h.sleep(2000);
   const n1 = await samples(client);
@@ -76,5 +88,6 @@ try {
   await h.stop(browser.child, "SIGTERM");
   await h.stop(serve.child, "SIGTERM");
   await h.stop(daemon, "SIGTERM");
+  await h.stop(second, "SIGTERM");
   process.exit(process.exitCode ?? 0);
 }

@@ -102,6 +102,31 @@ try {
   const rs = got.map((m) => m.r_um);
   h.check(Math.max(...rs) - Math.min(...rs) > 5, `r follows the multi-harmonic reference (span ${(Math.max(...rs) - Math.min(...rs)).toFixed(1)} um)`);
 
+  // A stalled client (10 subscriptions to every sample, never reading) does not hold up the
+  // others: its frames are dropped oldest-first and counted. (Building its 10 kHz of frames
+  // costs the server some CPU, so the rate bound here is 900/s; no sample may be missing.)
+  const stalled = new WebSocket(`ws://127.0.0.1:${control.port}`, ["foxglove.websocket.v1"]);
+  await new Promise((r) => stalled.on("open", r));
+  const telemetryId = s.channels.get(`/${RIG}/telemetry`).id;
+  stalled.send(JSON.stringify({ op: "subscribe", subscriptions: Array.from({ length: 10 }, (_, i) => ({ id: i, channelId: telemetryId })) }));
+  stalled._socket.pause();
+  await h.sleep(1500);
+  s.messages.set(sub, []);
+  const s0 = Date.now();
+  await h.sleep(3000);
+  const during = s.messages.get(sub).slice();
+  const duringRate = during.length / ((Date.now() - s0) / 1000);
+  let duringGaps = 0;
+  for (let i = 1; i < during.length; i++) if (during[i].seq !== during[i - 1].seq + 1) duringGaps++;
+  stalled.terminate();
+  const dropped = await h.waitFor("the stalled client's drop count in serve's log", () => {
+    const m = [...control.child.output.matchAll(/disconnected; (\d+) data messages dropped/g)].map((x) => Number(x[1]));
+    return m.find((n) => n > 0);
+  }, 5000);
+  console.log(`measured: beside a stalled client, ${duringRate.toFixed(0)} samples/s with ${duringGaps} gaps; ${dropped} frames dropped for the stalled one`);
+  h.check(duringRate >= 900 && duringGaps === 0 && during.length > 0, "beside a stalled client the others keep up (>= 900/s, no gaps)");
+  h.check(dropped > 1000, "the stalled client's oldest frames were dropped and counted");
+
   // Without --allow-control: a clear refusal, and the rig is left alone.
   const w = connect(watchOnly.port);
   await h.waitFor("the watch-only server's services", () => w.services.has(`/${RIG}/command`), 15000);

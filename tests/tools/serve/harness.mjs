@@ -115,7 +115,8 @@ export async function startBrowser(width = 1280, height = 1000) {
   const child = start(exe, ["--headless", "--disable-gpu", "--no-sandbox", "--remote-debugging-port=0",
     "--remote-debugging-address=127.0.0.1", `--user-data-dir=${profile}`, "--no-first-run", "--disable-extensions",
     "--disable-background-networking", "--disable-sync", "--metrics-recording-only", "--mute-audio",
-    `--window-size=${width},${height}`, "about:blank"], "chromium");
+    `--window-size=${width},${height}`, ...(process.env.PVCGEL_CHROMIUM_FLAGS ?? "").split(" ").filter(Boolean), "about:blank"],
+    "chromium");
   const port = await waitFor("chromium's DevTools endpoint", () => {
     const m = child.output.match(/DevTools listening on ws:\/\/127\.0\.0\.1:(\d+)\//);
     if (child.exitCode !== null) fail(`chromium exited: ${child.output}`);

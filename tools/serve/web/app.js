@@ -11,6 +11,7 @@ window.pvcgelStats = stats;   // read by the tests and the benchmark
 
 let ws = null;
 let allowControl = false;
+let defaultRig = null;      // pvcgel serve --rig: shown first when present
 const channels = new Map();   // channel id -> {rig, topic}
 const services = new Map();   // service name -> id
 const subscriptions = new Map();  // subscription id -> channel id
@@ -60,15 +61,34 @@ const plots = [
   { plot: makePlot("disturbance estimate d_hat (linear-block input units)", [{ label: "d_hat", stroke: "#939" }], "d_hat", false), keys: ["d"] },
 ];
 
-function draw() {
+// Everything the page changes is changed in one frame, at most one per batch
+// (~33/s): in a browser without GPU every frame costs a repaint, so text
+// updated between frames would cost as much as the plots.
+let frameRequested = false;
+function requestFrame() {
+  if (frameRequested) return;
+  frameRequested = true;
+  requestAnimationFrame(render);
+}
+
+/** Sets text only when it changed (an unchanged assignment still relayouts). */
+function setText(id, text, className) {
+  const el = $(id);
+  if (el.textContent !== text) el.textContent = text;
+  if (className !== undefined && el.className !== className) el.className = className;
+}
+
+function render() {
+  frameRequested = false;
   if (dirty) {
     dirty = false;
     for (const p of plots) p.plot.setData([cols.t, ...p.keys.map((k) => cols[k])]);
     stats.frames++;
+    showTracking();
   }
-  requestAnimationFrame(draw);
+  showStatus();
+  setText("samples", String(stats.samples));
 }
-requestAnimationFrame(draw);
 
 window.addEventListener("resize", () => {
   for (const p of plots) p.plot.setSize({ width: Math.max(400, $("plots").clientWidth - 10), height: PLOT_HEIGHT });
@@ -86,41 +106,33 @@ function addBatch(b) {
   while (batches.length && batches[0].t < tEnd - WINDOW_S) batches.shift();
   stats.samples += b.samples; stats.batches++; stats.gaps += b.gaps;
   dirty = true;
-  showTracking();
+  requestFrame();
 }
 
 function showTracking() {
   let n = 0, sumAbs = 0, sumSq = 0, max = 0;
   for (const b of batches) { n += b.n; sumAbs += b.sumAbs; sumSq += b.sumSq; max = Math.max(max, b.max); }
-  $("tracking").textContent = n ? `mean |e| ${(sumAbs / n).toFixed(3)} um, RMS ${Math.sqrt(sumSq / n).toFixed(3)} um, max |e| ${max.toFixed(3)} um (${n} samples)` : "–";
+  setText("tracking", n ? `mean |e| ${(sumAbs / n).toFixed(3)} um, RMS ${Math.sqrt(sumSq / n).toFixed(3)} um, max |e| ${max.toFixed(3)} um (${n} samples)` : "–");
 }
 
 function showStatus() {
-  const el = $("state");
   const alive = lastStatus && Date.now() - lastStatusMs < NO_DAEMON_AFTER_MS;
-  if (!alive) {
-    el.textContent = rig ? "no daemon" : "no daemon (no rig on the domain yet)";
-    el.className = "state no-daemon";
-    return;
-  }
+  if (!alive) return setText("state", rig ? "no daemon" : "no daemon (no rig on the domain yet)", "state no-daemon");
   const s = lastStatus;
-  el.textContent = s.state_name;
-  el.className = "state " + s.state_name;
-  $("mode").textContent = s.mode_name + (s.target === 1 ? " (open-loop voltage)" : "");
-  $("hv").textContent = s.high_voltage ? "ON" : "off";
-  $("fault").textContent = s.fault_name;
-  $("loop").textContent = `${s.cycles} cycles at ${(1 / s.period_s).toFixed(0)} Hz, ${s.overruns} overruns, latency p50/p99/p99.9/max ${s.latency_p50_us.toFixed(0)}/${s.latency_p99_us.toFixed(0)}/${s.latency_p999_us.toFixed(0)}/${s.latency_max_us.toFixed(0)} us, compute p99 ${s.compute_p99_us.toFixed(1)} us`;
-  $("inputs").textContent = `${s.commands_accepted} commands, ${s.chunks_accepted} chunks accepted, ${s.rejects_total} refused` + (s.rejects_total ? ` (last: ${s.last_reject_reason_name}: ${s.last_reject_detail})` : "");
+  setText("state", s.state_name, "state " + s.state_name);
+  setText("mode", s.mode_name + (s.target === 1 ? " (open-loop voltage)" : ""));
+  setText("hv", s.high_voltage ? "ON" : "off");
+  setText("fault", s.fault_name);
+  setText("loop", `${s.cycles} cycles at ${(1 / s.period_s).toFixed(0)} Hz, ${s.overruns} overruns, latency p50/p99/p99.9/max ${s.latency_p50_us.toFixed(0)}/${s.latency_p99_us.toFixed(0)}/${s.latency_p999_us.toFixed(0)}/${s.latency_max_us.toFixed(0)} us, compute p99 ${s.compute_p99_us.toFixed(1)} us`);
+  setText("inputs", `${s.commands_accepted} commands, ${s.chunks_accepted} chunks accepted, ${s.rejects_total} refused` + (s.rejects_total ? ` (last: ${s.last_reject_reason_name}: ${s.last_reject_detail})` : ""));
 }
-setInterval(() => {
-  showStatus();
-  $("samples").textContent = String(stats.samples);
-}, 250);
+// Without data (no daemon) nothing else asks for a frame: look twice a second.
+setInterval(requestFrame, 500);
 
 let lastCount = 0, lastCountMs = Date.now();
 setInterval(() => {
   const now = Date.now();
-  $("rate").textContent = `(${((stats.samples - lastCount) * 1000 / (now - lastCountMs)).toFixed(0)}/s, ${stats.gaps} lost)`;
+  setText("rate", `(${((stats.samples - lastCount) * 1000 / (now - lastCountMs)).toFixed(0)}/s, ${stats.gaps} lost)`);
   lastCount = stats.samples; lastCountMs = now;
 }, 1000);
 
@@ -151,7 +163,7 @@ function updateRigPicker() {
     picker.replaceChildren(...rigs.map((r) => new Option(r, r)));
     if (rig) picker.value = rig;
   }
-  if (!rig && rigs.length) selectRig(rigs[0]);
+  if (!rig && rigs.length) selectRig(rigs.includes(defaultRig) ? defaultRig : rigs[0]);
 }
 $("rig").addEventListener("change", (ev) => selectRig(ev.target.value));
 
@@ -161,7 +173,7 @@ function onMessageData(view) {
   if (!ch) return;
   const msg = JSON.parse(new TextDecoder().decode(new Uint8Array(view.buffer, 13)));
   if (ch.topic === "telemetry_batch") addBatch(msg);
-  else if (ch.topic === "status") { lastStatus = msg; lastStatusMs = Date.now(); showStatus(); }
+  else if (ch.topic === "status") { lastStatus = msg; lastStatusMs = Date.now(); requestFrame(); }
   else if (ch.topic === "command_reply") showReply(`reply to ${msg.client_id}: ${msg.accepted ? "accepted" : msg.reason_name + ": " + msg.detail}`, msg.accepted);
 }
 
@@ -182,6 +194,7 @@ function onServiceResponse(view) {
 function onText(m) {
   if (m.op === "serverInfo") {
     allowControl = m.metadata?.allow_control === "true";
+    defaultRig = m.metadata?.default_rig ?? null;
     $("controls").hidden = !allowControl;
     $("connection").textContent = `${m.name}${allowControl ? ", control allowed" : ", watch only"}`;
   } else if (m.op === "advertise") {
