@@ -6,6 +6,7 @@
 //
 //   node benchmarks/bench_serve.mjs --pvcgeld build/daemon/pvcgeld --pvcgel build/tools/pvcgel \
 //        --source . --out build [--seconds 20] [--page-decimation N]
+// PVCGEL_CHROMIUM_FLAGS adds chromium flags (e.g. to try rendering options).
 import * as h from "../tests/tools/serve/harness.mjs";
 
 const a = h.args();
@@ -18,7 +19,7 @@ const serve = await h.startServe(a, ["--reliable-telemetry", ...(a["page-decimat
 const browser = await h.startBrowser();
 try {
   const loaded = browser.client.Page.loadEventFired();
-  await browser.client.Page.navigate({ url: `http://127.0.0.1:${serve.port}/${process.env.Q ?? ''}` });
+  await browser.client.Page.navigate({ url: `http://127.0.0.1:${serve.port}/` });
   await loaded;
   await h.waitFor("the page to run", async () => (await h.evaluate(browser.client, "window.pvcgelStats?.samples ?? 0")) > 3000, 30000);
   await h.sleep(3000);  // past start-up

@@ -46,7 +46,7 @@ function makePlot(title, series, yLabel, legend) {
   return new uPlot({
     title, width, height: PLOT_HEIGHT,
     scales: { x: { time: false, range: () => xRange() } },
-    axes: [{ label: "loop time (s)" }, { label: yLabel }],
+    axes: [{ label: "loop time (s)" }, { label: yLabel, space: 20 }],
     series: [{ label: "t (s)" }, ...series],
     legend: { show: legend, live: false },
     cursor: { show: false },
@@ -206,7 +206,9 @@ function onText(m) {
   } else if (m.op === "advertiseServices") {
     for (const s of m.services) services.set(s.name, s.id);
   } else if (m.op === "status") {
-    $("server-message").textContent = m.message;
+    // Presence messages name their rig: show only the one on screen.
+    const about = m.id?.startsWith("presence:") ? m.id.slice("presence:".length) : null;
+    if (about === null || about === rig) $("server-message").textContent = about !== null && m.level === 0 ? "" : m.message;
   } else if (m.op === "serviceCallFailure") {
     showReply(`${calls.get(m.callId) ?? "request"}: refused: ${m.message}`, false);
     calls.delete(m.callId);
