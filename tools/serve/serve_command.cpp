@@ -10,12 +10,14 @@ namespace pvcgel::tools {
 
 namespace {
 
-/// The page: --web-root, else the source tree's (a build tree), else <prefix>/share/pvcgel/web (installed).
+/// The page: --web-root, else the installed one (<prefix>/share/pvcgel/web beside
+/// <prefix>/bin/pvcgel), else the source tree's (a binary in the build tree).
 std::string default_web_root() {
-  if (std::filesystem::exists(std::filesystem::path(PVCGEL_SERVE_WEB_DIR) / "index.html")) return PVCGEL_SERVE_WEB_DIR;
   std::error_code ec;
   const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-  return (exe.parent_path().parent_path() / "share" / "pvcgel" / "web").string();
+  const auto installed = exe.parent_path().parent_path() / "share" / "pvcgel" / "web";
+  if (!ec && std::filesystem::exists(installed / "index.html")) return installed.string();
+  return PVCGEL_SERVE_WEB_DIR;
 }
 
 }  // namespace

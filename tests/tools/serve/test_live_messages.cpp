@@ -2,7 +2,12 @@
 // the page's batches, and the drop-oldest client queue.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <vector>
 
 #include "tools/serve/live_messages.hpp"
 
@@ -100,4 +105,42 @@ TEST(LiveMessages, ClientQueueDropsOldestDataCountsItAndNeverDropsProtocolFrames
   EXPECT_TRUE(q.push_protocol(Frame{std::make_shared<const std::string>("a"), false}));
   EXPECT_TRUE(q.push_protocol(Frame{std::make_shared<const std::string>("b"), false}));
   EXPECT_FALSE(q.push_protocol(Frame{std::make_shared<const std::string>("c"), false}));  // too slow: disconnect
+}
+
+namespace {
+/// Field names of `struct NAME` in the project's IDL, in order.
+std::vector<std::string> idl_fields(const std::string& name) {
+  std::ifstream in(std::string(PVCGEL_SOURCE_DIR) + "/daemon/dds/pvcgel_v1.idl");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string idl = ss.str();
+  const auto begin = idl.find("struct " + name + " {");
+  const auto end = idl.find("};", begin);
+  std::vector<std::string> fields;
+  const std::regex field(R"(^\s*(?:@key\s+)?[A-Za-z_][\w<>, ]*\s+(\w+)(?:\[\d+\])?;)");
+  std::istringstream lines(idl.substr(begin, end - begin));
+  for (std::string line; std::getline(lines, line);) {
+    std::smatch m;
+    if (std::regex_search(line, m, field)) fields.push_back(m[1]);
+  }
+  return fields;
+}
+
+void expect_schema_matches_idl(const std::string& schema_text, const std::string& idl_struct) {
+  const auto props = nlohmann::json::parse(schema_text)["properties"];
+  const auto fields = idl_fields(idl_struct);
+  ASSERT_GT(fields.size(), 5u) << idl_struct;
+  for (const auto& f : fields) EXPECT_TRUE(props.contains(f)) << idl_struct << "." << f << " missing from the schema";
+  for (const auto& [key, value] : props.items()) {
+    if (key.size() >= 5 && key.substr(key.size() - 5) == "_name") continue;  // the added name strings
+    EXPECT_NE(std::find(fields.begin(), fields.end(), key), fields.end()) << key << " is not an IDL field of " << idl_struct;
+  }
+}
+}  // namespace
+
+// The schemas are the IDL's fields (plus *_name strings): a field added to the IDL fails here until served.
+TEST(LiveMessages, SchemasListExactlyTheIdlFields) {
+  expect_schema_matches_idl(telemetry_schema(), "Telemetry");
+  expect_schema_matches_idl(status_schema(), "Status");
+  expect_schema_matches_idl(reply_schema(), "CommandReply");
 }
