@@ -21,6 +21,8 @@ using Clock = std::chrono::steady_clock;
 constexpr std::size_t kMaxClientMessage = 64 * 1024;
 /// Bytes websocketpp may hold unsent for one client before we stop handing it more.
 constexpr std::size_t kMaxBuffered = 2 * 1024 * 1024;
+/// Rigs served at most: anyone on the domain can publish rig ids, each costs channels and memory.
+constexpr std::size_t kMaxRigs = 64;
 
 /// Channel offsets within a rig's block of ids (rig k: 1 + 8 k + offset).
 enum Topic : std::uint32_t { telemetry, telemetry_decimated, telemetry_batch, status, command_reply, kTopics };
@@ -67,7 +69,8 @@ class LiveServer final : public RigSink {
     std::uint64_t decimation_count = 0;
   };
 
-  Rig& rig_locked(const std::string& id);
+  /// The rig's record, made (and advertised) on first sight; nullptr beyond kMaxRigs.
+  Rig* rig_locked(const std::string& id);
   bool subscribed_locked(std::uint32_t channel) const;
   json channels_of(const Rig& rig) const;
   json services_of(const Rig& rig) const;
@@ -96,6 +99,7 @@ class LiveServer final : public RigSink {
   std::map<std::uint64_t, std::unique_ptr<Client>> clients_;
   std::map<std::string, std::unique_ptr<Rig>> rigs_;
   std::vector<Rig*> rig_by_index_;
+  bool rig_limit_logged_ = false;
   std::atomic<bool> stop_{false};
   Clock::time_point last_drop_report_ = Clock::now();
 };
@@ -161,16 +165,23 @@ json LiveServer::services_of(const Rig& rig) const {
   return services;
 }
 
-LiveServer::Rig& LiveServer::rig_locked(const std::string& id) {
+LiveServer::Rig* LiveServer::rig_locked(const std::string& id) {
+  if (const auto it = rigs_.find(id); it != rigs_.end()) return it->second.get();
+  if (rigs_.size() >= kMaxRigs) {
+    if (!rig_limit_logged_)
+      std::fprintf(stderr, "pvcgel serve: more than %zu rig ids on domain %d: ignoring '%s' and any further ones\n",
+                   kMaxRigs, opt_.dds.domain, id.c_str());
+    rig_limit_logged_ = true;
+    return nullptr;
+  }
   auto& rig = rigs_[id];
-  if (rig) return *rig;
   rig = std::make_unique<Rig>(Rig{id, static_cast<std::uint32_t>(rig_by_index_.size()),
                                   TelemetryBatcher(opt_.page_decimation), Clock::now(), 0});
   rig_by_index_.push_back(rig.get());
   std::fprintf(stderr, "pvcgel serve: rig '%s' on domain %d: advertising its channels\n", id.c_str(), opt_.dds.domain);
   broadcast_locked(json{{"op", "advertise"}, {"channels", channels_of(*rig)}}.dump());
   broadcast_locked(json{{"op", "advertiseServices"}, {"services", services_of(*rig)}}.dump());
-  return *rig;
+  return rig.get();
 }
 
 void LiveServer::schedule_drain_locked(Client& c) {
@@ -217,7 +228,9 @@ bool LiveServer::subscribed_locked(std::uint32_t channel) const {
 
 void LiveServer::on_telemetry(const pvcgel_v1_Telemetry& t) {
   std::lock_guard lock(mutex_);
-  Rig& rig = rig_locked(t.rig_id);
+  Rig* found = rig_locked(t.rig_id);
+  if (!found) return;
+  Rig& rig = *found;
   rig.batcher.add(t);
   const std::uint32_t base = 1 + 8 * rig.index;
   const bool decimated = rig.decimation_count++ % static_cast<std::uint64_t>(opt_.foxglove_decimation) == 0;
@@ -231,16 +244,18 @@ void LiveServer::on_telemetry(const pvcgel_v1_Telemetry& t) {
 
 void LiveServer::on_status(const pvcgel_v1_Status& s) {
   std::lock_guard lock(mutex_);
-  Rig& rig = rig_locked(s.rig_id);
+  const Rig* rig = rig_locked(s.rig_id);
+  if (!rig) return;
   const auto now_ns = static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count());
-  publish_locked(1 + 8 * rig.index + status, now_ns, to_json(s).dump(), true);
+  publish_locked(1 + 8 * rig->index + status, now_ns, to_json(s).dump(), true);
 }
 
 void LiveServer::on_reply(const pvcgel_v1_CommandReply& r) {
   std::lock_guard lock(mutex_);
-  Rig& rig = rig_locked(r.rig_id);
+  const Rig* rig = rig_locked(r.rig_id);
+  if (!rig) return;
   const auto now_ns = static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count());
-  publish_locked(1 + 8 * rig.index + command_reply, now_ns, to_json(r).dump(), true);
+  publish_locked(1 + 8 * rig->index + command_reply, now_ns, to_json(r).dump(), true);
 }
 
 void LiveServer::on_presence(const std::string& rig, bool present) {
