@@ -35,6 +35,17 @@ NoDaemon no_daemon_error(const std::string& rig, int domain, double wait_s, cons
   return NoDaemon("rig '" + rig + "' unknown; rigs seen: " + seen);
 }
 
+dds::Entity make_client_participant(const ClientOptions& o) {
+  if (o.dds_config.empty())
+    throw std::runtime_error("no DDS configuration: pass --dds-config FILE or set PVCGEL_DDS_CONFIG (on one PC: "
+                             "config/cyclonedds-loopback.xml)");
+  dds::DdsSettings s;
+  s.domain = o.domain;
+  s.config_path = o.dds_config;
+  s.rig_id = o.rig;
+  return dds::make_participant(s);
+}
+
 void add_client_options(CLI::App& cmd, ClientOptions& o) {
   if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
   cmd.add_option("--rig", o.rig, "rig id (the daemon's [dds] rig_id)")->capture_default_str();
@@ -46,9 +57,6 @@ void add_client_options(CLI::App& cmd, ClientOptions& o) {
 }
 
 DdsClient::DdsClient(const ClientOptions& o, bool telemetry, bool reliable_telemetry) : opt_(o) {
-  if (opt_.dds_config.empty())
-    throw std::runtime_error("no DDS configuration: pass --dds-config FILE or set PVCGEL_DDS_CONFIG (on one PC: "
-                             "config/cyclonedds-loopback.xml)");
   char host[64] = "host";
   gethostname(host, sizeof host - 1);
   client_id_ = std::string("pvcgel@") + host;
@@ -56,11 +64,7 @@ DdsClient::DdsClient(const ClientOptions& o, bool telemetry, bool reliable_telem
   // Sequence numbers start from the clock so a restarted client never reuses a recent one.
   next_seq_ = static_cast<std::uint64_t>(realtime_ns() / 1000);
 
-  dds::DdsSettings s;
-  s.domain = opt_.domain;
-  s.config_path = opt_.dds_config;
-  s.rig_id = opt_.rig;
-  participant_ = dds::make_participant(s);
+  participant_ = make_client_participant(opt_);
   const dds_entity_t p = participant_.get();
   reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
                              "CommandReply topic");

@@ -31,6 +31,10 @@ struct ClientOptions {
 /// Adds --rig, --domain, --dds-config, --wait to a subcommand.
 void add_client_options(CLI::App& cmd, ClientOptions& o);
 
+/// Joins `o.domain` with `o.dds_config` (required: the default configuration
+/// would discover on every interface). @throws std::runtime_error saying what to pass.
+dds::Entity make_client_participant(const ClientOptions& o);
+
 /// The daemon's answer to one command or chunk.
 struct Reply {
   bool accepted = false;

@@ -8,6 +8,7 @@
 #include "tools/diagnose_command.hpp"
 #include "tools/ident_command.hpp"
 #include "tools/record_command.hpp"
+#include "tools/serve/serve_command.hpp"
 #include "tools/show_command.hpp"
 
 int main(int argc, char** argv) {
@@ -19,6 +20,7 @@ int main(int argc, char** argv) {
   pvcgel::tools::add_ident_command(app);
   pvcgel::tools::add_client_commands(app);
   pvcgel::tools::add_diagnose_command(app);
+  pvcgel::tools::add_serve_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
