@@ -17,6 +17,7 @@
 
 #include "control/config_error.hpp"
 #include "control/config_parser.hpp"
+#include "control/identification/model_selection.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/recording.hpp"
 #include "tools/text_output.hpp"
@@ -478,7 +479,7 @@ void describe_fits(const IdentificationResult& r, const IdentificationOptions& i
                   c.monotone() ? "yes" : format("no: turns over at %.1f V", *c.turnover_V).c_str())
         << toml_array(c.c) << "\n";
   }
-  out << "  chosen n = " << r.f_fit.chosen_terms << ": " << r.f_fit.rule << "\n";
+  out << "  frequency-domain rule: n = " << r.f_fit.chosen_terms << ": " << r.f_fit.rule << "\n";
 }
 
 void describe_against_truth(const IdentificationResult& r, const IdentificationOptions& io,
@@ -531,23 +532,56 @@ void validate_in_time(std::vector<Validation>& validations, const Identification
   }
 }
 
-void write_model(const IdentArgs& a, const IdentificationResult& r, const IdentificationOptions& io, std::ostream& out) {
+/// Chooses n by held-out time-domain validation (the frequency-domain rule when
+/// there is no held-out data or n was forced) and prints both rules' picks.
+ModelChoice choose_model(const IdentArgs& a, const std::vector<Validation>& validations, IdentificationResult& r,
+                         std::ostream& out) {
+  std::vector<std::vector<PredictionMetrics>> metrics;
+  for (const auto& v : validations)
+    if (v.held_out && !v.metrics.empty()) metrics.push_back(v.metrics);
+  ModelChoiceOptions o;
+  for (size_t i : r.used) o.highest_bias_V = std::max(o.highest_bias_V, r.points[i].bias_V);
+  out << "\nChoice of n (frequency-domain rule above: n = " << r.f_fit.chosen_terms << ")\n";
+  ModelChoice choice;
+  if (a.options.f.forced_terms || metrics.empty()) {
+    choice.terms = r.f_fit.chosen_terms;
+    choice.rule = a.options.f.forced_terms ? r.f_fit.rule : "no held-out recordings: " + r.f_fit.rule;
+    if (const auto turn = r.f_fit.chosen().turnover_V) choice.voltage_max_V = std::floor(0.98 * *turn);
+  } else {
+    choice = choose_by_validation(r.f_fit, metrics, o);
+  }
+  out << "  held-out time-domain rule: n = " << choice.terms << ": " << choice.rule << "\n  chosen: n = "
+      << choice.terms;
+  if (choice.voltage_max_V) out << format(", with controller.voltage_max_V = %.0f V", *choice.voltage_max_V);
+  out << "\n";
+  r.f_fit.chosen_terms = choice.terms;
+  return choice;
+}
+
+void write_model(const IdentArgs& a, const IdentificationResult& r, const IdentificationOptions& io,
+                 const ModelChoice& choice, std::ostream& out) {
   const auto model = r.chosen_model();
-  std::string comment = "pvcgel ident: " + (a.sim ? std::string("simulated rig") : "recordings in " + a.from) +
-                        "\nn = " + std::to_string(r.f_fit.chosen_terms) + ": " + r.f_fit.rule +
-                        "\nnormalisation: N(A_ref = " + format("%g", io.reference_amplitude_V) + " V, B_ref = " +
-                        format("%g", io.reference_bias_V) + " V) = 1 for the fit of G; f carries the scale";
-  if (const auto turn = model.f.first_turnover(1000.0))
-    comment += format("\nWARNING: f turns over at %.1f V: set controller.voltage_max_V below that", *turn);
-  const std::string text = model_toml(model, comment);
-  // The file must be what the daemon accepts: parse it back before writing.
+  std::string comment =
+      "pvcgel ident: " + (a.sim ? std::string("simulated rig") : "recordings in " + a.from) +
+      "\nn = " + std::to_string(choice.terms) + ": " + choice.rule + "\nfrequency-domain rule: " + r.f_fit.rule +
+      "\nnormalisation: N(A_ref = " + format("%g", io.reference_amplitude_V) + " V, B_ref = " +
+      format("%g", io.reference_bias_V) + " V) = 1 for the fit of G; f carries the scale" +
+      "\nconventions: f maps the amplifier voltage u (V) to the linear block's input; G maps that to the "
+      "displacement y (um), coefficients in descending powers of s; u[k] is applied at the cycle after y[k] is "
+      "measured and held (zero-order hold), plus io_delay_samples whole samples of I/O delay, which the fit removed";
+  std::string text = model_toml(model, comment) + format("io_delay_samples = %d\n", io.io_delay_samples);
+  if (choice.voltage_max_V)
+    text += format("\n# f turns over above this: the inverse controller needs f strictly increasing up to the limit\n"
+                   "[controller]\nvoltage_max_V = %.0f\n",
+                   *choice.voltage_max_V);
+  // The file must be what the daemon accepts: parse it back (model and controller) before writing.
   try {
-    (void)control::parse_model(toml::parse(text), a.out);
+    (void)control::parse_configuration(toml::parse(text), a.out);
   } catch (const std::exception& e) {
     throw std::runtime_error(std::string("internal: the model file does not parse back: ") + e.what());
   }
   write_text_file(a.out, text);
-  out << "wrote " << a.out << " (n = " << r.f_fit.chosen_terms << ")\n";
+  out << "wrote " << a.out << " (n = " << choice.terms << ")\n";
 }
 
 void write_report(const IdentArgs& a, const IdentificationResult& r, const IdentificationOptions& io,
@@ -571,7 +605,9 @@ void write_report(const IdentArgs& a, const IdentificationResult& r, const Ident
      << "- G(s): Levy / Sanathanan-Koerner, then Levenberg-Marquardt on the relative complex error, at the "
         "reference regime.\n"
      << "- Normalisation: " << kNormalisation << "\n"
-     << "- f: paper eq. (10) for n = 1.." << max_n << "; rule: " << r.f_fit.rule << ".\n\n"
+     << "- f: paper eq. (10) for n = 1.." << max_n << "; frequency-domain rule: " << r.f_fit.rule << ".\n"
+     << "- n used: the smallest whose mean held-out time-domain NRMSE is within 5% of the best; a degree whose f "
+        "turns over below 1000 V comes with `controller.voltage_max_V` just below the turnover (see Results).\n\n"
      << "## Results\n\n```\n" << results << "```\n\n## Plots\n\n"
      << "- Fig. 6 analogue: ![bode](bode.png)\n";
   for (const auto& c : r.f_fit.candidates)
@@ -601,16 +637,16 @@ IdentOutcome run_ident(const IdentArgs& a) {
   IdentOutcome outcome{identify(acq.points, io), "", 0.0, false};
   outcome.cpu_extract_fit_s = acq.cpu_s + process_cpu_s() - c0;
   const auto& r = outcome.result;
-
   describe_points(r, io, out);
   describe_fits(r, io, out);
   if (acq.truth) describe_against_truth(r, io, *acq.truth, out);
-  validate_in_time(acq.validations, r, io, out);
+  validate_in_time(acq.validations, outcome.result, io, out);
+  const ModelChoice choice = choose_model(a, acq.validations, outcome.result, out);
   out << format("\nCPU time for extraction and fits (%zu points): %.3f s\n", r.points.size(), outcome.cpu_extract_fit_s);
   const std::string problem = r.G_fit.control_problem();
   if (!problem.empty()) out << "\nREFUSED: " << problem << "\n";
   if (problem.empty() && !a.out.empty()) {
-    write_model(a, r, io, out);
+    write_model(a, r, io, choice, out);
     outcome.model_written = true;
   }
   if (!a.report.empty()) write_report(a, r, io, acq.validations, out.str(), out);
@@ -628,7 +664,7 @@ void add_ident_command(CLI::App& app) {
   c->add_option("--dds-config", a->dds_config, "--rig: Cyclone DDS XML (default $PVCGEL_DDS_CONFIG)");
   c->add_option("--from", a->from, "directory of recordings (*.csv, pvcgeld format), one sine experiment each");
   c->add_option("--validation-dir", a->validation_dir, "held-out recordings for time-domain validation (default FROM/validation)");
-  c->add_option("--out", a->out, "write the [model] table (poly, G_num, G_den) to FILE");
+  c->add_option("--out", a->out, "write the model file to FILE: [model] (poly, G_num, G_den, io_delay_samples), and [controller] voltage_max_V when f turns over below 1000 V");
   c->add_option("--report", a->report, "write report.md and PNG plots to DIR");
   c->add_option("--save-recordings", a->save_recordings,
                 "--sim: also write every experiment as a recording to DIR; --rig: where the recordings go "
