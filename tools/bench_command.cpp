@@ -15,6 +15,7 @@
 
 #include "tools/gnuplot.hpp"
 #include "tools/paper_bench.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -29,13 +30,6 @@ struct PaperArgs {
   bool sweep = false, crossover_given = false, seed_given = false, phase_margin_given = false;
   std::vector<double> sweep_values{15, 20, 30, 45, 60, 80, 120, 160, 250};
 };
-
-void write_file(const fs::path& p, const std::string& s) {
-  std::ofstream f(p);
-  if (!f) throw std::runtime_error("cannot write " + p.string());
-  f << s;
-  if (!f.flush()) throw std::runtime_error("write failed: " + p.string());
-}
 
 void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, const fs::path& dir) {
   fs::create_directories(dir);
@@ -70,7 +64,7 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
             colors[m] + "' t '" + titles[m] + "'";
     gp += "\nunset multiplot\n";
     const fs::path script = dir / (rr.name + ".gp");
-    write_file(script, gp);
+    write_text_file(script, gp);
     run_gnuplot(script);
     std::cout << "wrote " << (dir / (rr.name + ".png")).string() << "\n";
   }
@@ -138,7 +132,7 @@ void run_paper(const PaperArgs& a) {
     if (!a.plot_dir.empty()) {
       fs::create_directories(a.plot_dir);
       const fs::path d = fs::path(a.plot_dir) / "sweep.dat";
-      write_file(d, dat);
+      write_text_file(d, dat);
       std::string gp = "set terminal pngcairo size 1100,800 font ',10'\nset output '" +
                        (fs::path(a.plot_dir) / "sweep.png").string() +
                        "'\nset multiplot layout 2,2 title 'Mean tracking error vs PID crossover target'\n"
@@ -154,7 +148,7 @@ void run_paper(const PaperArgs& a) {
       }
       gp += "unset multiplot\n";
       const auto script = fs::path(a.plot_dir) / "sweep.gp";
-      write_file(script, gp);
+      write_text_file(script, gp);
       run_gnuplot(script);
       std::cout << "wrote " << (fs::path(a.plot_dir) / "sweep.png").string() << "\n";
     }
@@ -167,7 +161,7 @@ void run_paper(const PaperArgs& a) {
   std::printf("\nSimulation speed: %.2f million closed-loop steps/s (%.0fx real time at 1 kHz)\n",
               r.steps_per_second / 1e6, r.steps_per_second / 1000.0);
   if (!a.json.empty()) {
-    write_file(a.json, to_json(r, o));
+    write_text_file(a.json, to_json(r, o));
     std::cout << "wrote " << a.json << "\n";
   }
   if (!a.plot_dir.empty()) plot_references(r, o, a.plot_dir);

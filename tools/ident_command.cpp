@@ -17,8 +17,10 @@
 
 #include "control/config_error.hpp"
 #include "control/config_parser.hpp"
+#include "control/identification/model_selection.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/recording.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -30,33 +32,11 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-/// Process CPU time (what the speed target is about, not wall time).
-double cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
-
-std::string fmt(const char* f, auto... v) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, f, v...);
-  return buf;
-}
-
-std::string join(const std::vector<double>& v) {
-  std::string s = "[";
-  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + fmt("%.10g", v[i]);
-  return s + "]";
-}
-
-void write_file(const fs::path& p, const std::string& s) {
-  std::ofstream f(p);
-  if (!f) throw std::runtime_error("cannot write " + p.string());
-  f << s;
-  if (!f.flush()) throw std::runtime_error("write failed: " + p.string());
-}
-
 std::string roots_text(const Eigen::VectorXcd& r) {
   std::string s;
   for (Eigen::Index i = 0; i < r.size(); ++i) {
     s += i ? ", " : "";
-    s += std::abs(r(i).imag()) < 1e-12 ? fmt("%.4f", r(i).real()) : fmt("%.4f%+.4fj", r(i).real(), r(i).imag());
+    s += std::abs(r(i).imag()) < 1e-12 ? format("%.4f", r(i).real()) : format("%.4f%+.4fj", r(i).real(), r(i).imag());
   }
   return s.empty() ? "none" : s;
 }
@@ -137,7 +117,7 @@ void plot_bode(const IdentificationResult& r, const fs::path& dir) {
      << "' u 1:2 w l lw 2 lc rgb '#1f77b4' t 'G(s)'\nunset logscale y\nset ylabel 'phase (deg)'\n"
      << "plot '" << meas.string() << "' u 1:4 w p pt 7 lc rgb 'black' t 'measured', '" << model.string()
      << "' u 1:3 w l lw 2 lc rgb '#1f77b4' t 'G(s)'\nunset multiplot\n";
-  write_file(dir / "bode.gp", gp.str());
+  write_text_file(dir / "bode.gp", gp.str());
   run_gnuplot(dir / "bode.gp");
 }
 
@@ -181,7 +161,7 @@ void plot_gains(const IdentificationResult& r, const fs::path& dir) {
     }
     gp << "unset multiplot\n";
     const fs::path script = dir / ("gain_n" + std::to_string(n) + ".gp");
-    write_file(script, gp.str());
+    write_text_file(script, gp.str());
     run_gnuplot(script);
   }
 }
@@ -215,7 +195,7 @@ void plot_validation(const std::vector<Validation>& vals, int max_n, const fs::p
     gp << "\n";
   }
   gp << "unset multiplot\n";
-  write_file(dir / "validation.gp", gp.str());
+  write_text_file(dir / "validation.gp", gp.str());
   run_gnuplot(dir / "validation.gp");
 }
 
@@ -225,7 +205,7 @@ std::string model_toml(const HammersteinModel& m, const std::string& comment) {
   std::string s;
   std::istringstream in(comment);
   for (std::string line; std::getline(in, line);) s += "# " + line + "\n";
-  s += "[model]\npoly = " + join(m.f.coefficients()) + "\nG_num = " + join(m.G.num()) + "\nG_den = " + join(m.G.den()) + "\n";
+  s += "[model]\npoly = " + toml_array(m.f.coefficients()) + "\nG_num = " + toml_array(m.G.num()) + "\nG_den = " + toml_array(m.G.den()) + "\n";
   return s;
 }
 
@@ -246,187 +226,211 @@ void write_sine_recording(const fs::path& path, const SineRecord& r,
   if (!ok) throw std::runtime_error("writing recording '" + path.string() + "' failed");
 }
 
-IdentOutcome run_ident(const IdentArgs& a) {
-  if (static_cast<int>(a.sim) + static_cast<int>(!a.from.empty()) + static_cast<int>(!a.rig.empty()) != 1)
-    throw std::runtime_error("give exactly one of --sim, --from DIR or --rig ID");
-  if (!a.save_recordings.empty() && a.sim + !a.rig.empty() == 0)
-    throw std::runtime_error("--save-recordings needs --sim or --rig");
-  if (!a.rig.empty()) {
-    // The experiments run on the rig and are kept as recordings; the fit is then
-    // exactly that of `--from` on them.
-    ClientOptions o;
-    o.rig = a.rig;
-    o.domain = a.domain;
-    o.dds_config = a.dds_config;
-    if (o.dds_config.empty())
-      if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
-    char stamp[32];
-    const std::time_t now = std::time(nullptr);
-    std::strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%S", std::gmtime(&now));
-    const fs::path dir = a.save_recordings.empty() ? fs::path("ident-" + a.rig + "-" + stamp) : fs::path(a.save_recordings);
-    const std::string rig_line = run_plan_on_rig(a, o, dir);
-    IdentArgs b = a;
-    b.rig.clear();
-    b.save_recordings.clear();
-    b.from = dir.string();
-    IdentOutcome o2 = run_ident(b);
-    o2.summary = rig_line + o2.summary;
-    return o2;
-  }
+namespace {
 
-  const bool progress = !a.quiet;
+/// What one acquisition (simulated rig or recordings) produced for the fit.
+struct Acquisition {
   std::vector<FrequencyResponsePoint> points;
   std::vector<Validation> validations;
-  double cpu = 0.0;
-  double Ts = a.options.sample_time_s;
-  std::optional<control::SimRigConfig> rig_cfg;
-  std::ostringstream out;
+  double sample_time_s = 1e-3;
+  double cpu_s = 0.0;                           ///< extraction only
+  std::optional<control::SimRigConfig> truth;   ///< the simulated rig, for the comparison
+};
 
-  if (a.sim) {
-    control::SimRigConfig cfg;
-    if (!a.config.empty()) {
-      toml::table root;
-      try {
-        root = toml::parse_file(a.config);
-      } catch (const toml::parse_error& e) {
-        throw std::runtime_error(a.config + ": " + std::string(e.description()));
-      }
-      cfg = control::parse_configuration(root, a.config, {"loop", "hal", "safety", "run"}).sim;
+control::SimRigConfig sim_rig_config(const IdentArgs& a) {
+  control::SimRigConfig cfg;
+  if (!a.config.empty()) {
+    toml::table root;
+    try {
+      root = toml::parse_file(a.config);
+    } catch (const toml::parse_error& e) {
+      throw std::runtime_error(a.config + ": " + std::string(e.description()));
     }
-    cfg.seed = a.seed;
-    if (a.ideal) {
-      cfg.hysteresis.enabled = false;
-      cfg.creep.enabled = false;
-    }
-    Ts = cfg.sample_time_s;
-    rig_cfg = cfg;
-    const auto plan = ExcitationPlan::from_grid(a.grid, Ts);
-    control::SimulatedRig rig(cfg);
-    out << "Simulated rig: truth f = " << join(cfg.truth.f.coefficients()) << ", G = " << cfg.truth.G.to_string()
-        << ", I/O delay " << cfg.io_delay_samples << " sample(s), noise " << cfg.noise_sigma_um << " um, hysteresis "
-        << (cfg.hysteresis.enabled ? "on" : "off") << ", creep " << (cfg.creep.enabled ? "on" : "off") << "\n";
-    out << "Plan: " << plan.points().size() << " sine experiments, " << fmt("%.0f", plan.total_duration_s())
-        << " s of rig time (settling " << a.grid.settle_s << " s each)\n";
-    size_t i = 0;
-    for (const auto& p : plan.points()) {
-      ++i;
-      const auto rec = run_sine_experiment(rig, p);
-      const std::string label = fmt("A%03.0f_B%03.0f_f%07.4fHz", p.amplitude_V, p.bias_V, p.frequency_Hz);
-      if (!a.save_recordings.empty())
-        write_sine_recording(fs::path(a.save_recordings) / (label + ".csv"), rec,
-                             {{"rate_hz", fmt("%.0f", 1.0 / Ts)},
-                              {"hal_backend", "sim"},
-                              {"trajectory", fmt("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz)},
-                              {"mode", "open_loop"},
-                              {"settle_s", fmt("%g", p.settle_s)}});
-      ExtractionOptions eo;
-      eo.settle_s = p.settle_s;
-      eo.min_periods = a.min_periods;
-      const double c0 = cpu_s();
-      points.push_back(extract_frequency_response(rec.t_s, rec.u_V, rec.y_um, eo, label));
-      cpu += cpu_s() - c0;
-      if (progress)
-        std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s simulated, |H| = %.5f um/V%s\n", i,
-                     plan.points().size(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.duration_s(),
-                     points.back().gain(), points.back().valid ? "" : (" FLAGGED: " + points.back().problem).c_str());
-    }
-    // Held-out experiments: separate runs (other noise) of the paper's Fig. 10 settings.
-    control::SimRigConfig vcfg = cfg;
-    vcfg.seed = a.seed + 1000;
-    control::SimulatedRig vrig(vcfg);
-    for (double f : a.validation_frequencies_Hz) {
-      SinePoint p{a.validation_amplitude_V, a.validation_bias_V, f, a.grid.settle_s,
-                  std::max(ExcitationPlan::kMinPeriods, static_cast<int>(std::ceil(10.0 * f)))};
-      (void)ExcitationPlan({p}, Ts);  // validates the voltage range
-      Validation v;
-      v.label = fmt("A = %.0f V, B = %.0f V, f = %g Hz", p.amplitude_V, p.bias_V, f);
-      v.record = run_sine_experiment(vrig, p);
-      v.settle_s = p.settle_s;
-      if (!a.save_recordings.empty())
-        write_sine_recording(fs::path(a.save_recordings) / "validation" /
-                                 fmt("A%03.0f_B%03.0f_f%07.4fHz.csv", p.amplitude_V, p.bias_V, f),
-                             v.record, {{"rate_hz", fmt("%.0f", 1.0 / Ts)}, {"hal_backend", "sim"},
-                                        {"trajectory", fmt("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, f)},
-                                        {"mode", "open_loop"}, {"settle_s", fmt("%g", p.settle_s)}});
-      validations.push_back(std::move(v));
-    }
-    if (!a.save_recordings.empty()) out << "Recordings written to " << a.save_recordings << "/ (held-out ones in validation/)\n";
-  } else {
-    const auto files = csv_files(a.from);
-    out << "Recordings: " << files.size() << " in " << a.from << "\n";
-    double read_s = 0.0;
-    std::optional<double> Ts_seen;
-    size_t i = 0;
-    for (const auto& file : files) {
-      ++i;
-      const double c0 = cpu_s();
-      Recording rec;
-      try {
-        rec = read_recording(file.string());
-      } catch (const std::exception& e) {
-        // Unusable file (gaps, non-uniform time, ...): flagged, excluded, reported.
-        FrequencyResponsePoint bad;
-        bad.source = file.filename().string();
-        bad.problem = e.what();
-        points.push_back(bad);
-        if (progress) std::fprintf(stderr, "[%zu/%zu] %s: FLAGGED: %s\n", i, files.size(), bad.source.c_str(), e.what());
-        continue;
-      }
-      read_s += cpu_s() - c0;
-      if (Ts_seen && std::abs(*Ts_seen - rec.sample_time_s) > 1e-3 * *Ts_seen)
-        throw std::runtime_error(file.string() + ": sample time " + fmt("%g", rec.sample_time_s) +
-                                 " s differs from the other recordings' " + fmt("%g", *Ts_seen) + " s");
-      Ts_seen = rec.sample_time_s;
-      ExtractionOptions eo;
-      eo.settle_s = header_number(rec, "settle_s", a.settle_s);
-      eo.min_periods = a.min_periods;
-      const double c1 = cpu_s();
-      points.push_back(extract_frequency_response(rec.col("t_s"), rec.col("u_V"), rec.col("y_um"), eo,
-                                                  file.filename().string()));
-      cpu += cpu_s() - c1;
-      const auto& p = points.back();
-      if (progress)
-        std::fprintf(stderr, "[%zu/%zu] %s: A = %.1f V, B = %.1f V, f = %.4f Hz, |H| = %.5f um/V%s\n", i, files.size(),
-                     p.source.c_str(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.gain(),
-                     p.valid ? "" : (" FLAGGED: " + p.problem).c_str());
-      if (p.valid && is_validation_target(a, p.amplitude_V, p.bias_V, p.frequency_Hz)) {
-        Validation v;
-        v.label = p.source;
-        v.record = to_record(rec);
-        v.record.point.frequency_Hz = p.frequency_Hz;
-        v.settle_s = eo.settle_s;
-        v.held_out = false;
-        validations.push_back(std::move(v));
-      }
-    }
-    if (Ts_seen) Ts = *Ts_seen;
-    out << fmt("Reading the recordings took %.2f s CPU (not counted below)\n", read_s);
-    // Held-out recordings, if there are any, replace the in-fit stand-ins.
-    fs::path vdir = a.validation_dir.empty() ? fs::path(a.from) / "validation" : fs::path(a.validation_dir);
-    if (fs::is_directory(vdir)) {
-      validations.clear();
-      for (const auto& file : csv_files(vdir)) {
-        const auto rec = read_recording(file.string());
-        Validation v;
-        v.label = file.filename().string();
-        v.record = to_record(rec);
-        v.settle_s = header_number(rec, "settle_s", a.settle_s);
-        const auto est = estimate_sine(v.record.t_s, v.record.u_V, 0, v.record.t_s.size());
-        v.record.point.frequency_Hz = est.frequency_Hz;
-        validations.push_back(std::move(v));
-      }
-    } else if (!a.validation_dir.empty()) {
-      throw std::runtime_error("--validation-dir: '" + a.validation_dir + "' is not a directory");
-    }
+    cfg = control::parse_configuration(root, a.config, {"loop", "hal", "safety", "run"}).sim;
   }
+  cfg.seed = a.seed;
+  if (a.ideal) {
+    cfg.hysteresis.enabled = false;
+    cfg.creep.enabled = false;
+  }
+  return cfg;
+}
 
-  IdentificationOptions io = a.options;
-  io.sample_time_s = Ts;
-  const double c0 = cpu_s();
-  IdentificationResult r = identify(points, io);
-  cpu += cpu_s() - c0;
+std::vector<std::pair<std::string, std::string>> sim_recording_header(const SinePoint& p, double Ts) {
+  return {{"rate_hz", format("%.0f", 1.0 / Ts)},
+          {"hal_backend", "sim"},
+          {"trajectory", format("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz)},
+          {"mode", "open_loop"},
+          {"settle_s", format("%g", p.settle_s)}};
+}
 
-  // --- frequency responses
+std::string sine_label(const SinePoint& p) {
+  return format("A%03.0f_B%03.0f_f%07.4fHz", p.amplitude_V, p.bias_V, p.frequency_Hz);
+}
+
+/// Held-out experiments: separate runs (other noise) of the paper's Fig. 10 settings.
+std::vector<Validation> held_out_on_sim(const IdentArgs& a, const control::SimRigConfig& cfg) {
+  control::SimRigConfig vcfg = cfg;
+  vcfg.seed = a.seed + 1000;
+  control::SimulatedRig vrig(vcfg);
+  std::vector<Validation> validations;
+  for (double f : a.validation_frequencies_Hz) {
+    SinePoint p{a.validation_amplitude_V, a.validation_bias_V, f, a.grid.settle_s,
+                std::max(ExcitationPlan::kMinPeriods, static_cast<int>(std::ceil(10.0 * f)))};
+    (void)ExcitationPlan({p}, cfg.sample_time_s);  // validates the voltage range
+    Validation v;
+    v.label = format("A = %.0f V, B = %.0f V, f = %g Hz", p.amplitude_V, p.bias_V, f);
+    v.record = run_sine_experiment(vrig, p);
+    v.settle_s = p.settle_s;
+    if (!a.save_recordings.empty())
+      write_sine_recording(fs::path(a.save_recordings) / "validation" / (sine_label(p) + ".csv"), v.record,
+                           sim_recording_header(p, cfg.sample_time_s));
+    validations.push_back(std::move(v));
+  }
+  return validations;
+}
+
+Acquisition acquire_from_sim(const IdentArgs& a, std::ostream& out) {
+  Acquisition acq;
+  const control::SimRigConfig cfg = sim_rig_config(a);
+  acq.sample_time_s = cfg.sample_time_s;
+  acq.truth = cfg;
+  const auto plan = ExcitationPlan::from_grid(a.grid, acq.sample_time_s);
+  control::SimulatedRig rig(cfg);
+  out << "Simulated rig: truth f = " << toml_array(cfg.truth.f.coefficients()) << ", G = " << cfg.truth.G.to_string()
+      << ", I/O delay " << cfg.io_delay_samples << " sample(s), noise " << cfg.noise_sigma_um << " um, hysteresis "
+      << (cfg.hysteresis.enabled ? "on" : "off") << ", creep " << (cfg.creep.enabled ? "on" : "off") << "\n";
+  out << "Plan: " << plan.points().size() << " sine experiments, " << format("%.0f", plan.total_duration_s())
+      << " s of rig time (settling " << a.grid.settle_s << " s each)\n";
+  size_t i = 0;
+  for (const auto& p : plan.points()) {
+    ++i;
+    const auto rec = run_sine_experiment(rig, p);
+    if (!a.save_recordings.empty())
+      write_sine_recording(fs::path(a.save_recordings) / (sine_label(p) + ".csv"), rec,
+                           sim_recording_header(p, acq.sample_time_s));
+    ExtractionOptions eo;
+    eo.settle_s = p.settle_s;
+    eo.min_periods = a.min_periods;
+    const double c0 = process_cpu_s();
+    acq.points.push_back(extract_frequency_response(rec.t_s, rec.u_V, rec.y_um, eo, sine_label(p)));
+    acq.cpu_s += process_cpu_s() - c0;
+    if (!a.quiet)
+      std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s simulated, |H| = %.5f um/V%s\n", i,
+                   plan.points().size(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.duration_s(),
+                   acq.points.back().gain(),
+                   acq.points.back().valid ? "" : (" FLAGGED: " + acq.points.back().problem).c_str());
+  }
+  acq.validations = held_out_on_sim(a, cfg);
+  if (!a.save_recordings.empty())
+    out << "Recordings written to " << a.save_recordings << "/ (held-out ones in validation/)\n";
+  return acq;
+}
+
+/// Held-out recordings in `dir`; each one's frequency is estimated from its u.
+std::vector<Validation> held_out_recordings(const fs::path& dir, double default_settle_s) {
+  std::vector<Validation> validations;
+  for (const auto& file : csv_files(dir)) {
+    const auto rec = read_recording(file.string());
+    Validation v;
+    v.label = file.filename().string();
+    v.record = to_record(rec);
+    v.settle_s = header_number(rec, "settle_s", default_settle_s);
+    const auto est = estimate_sine(v.record.t_s, v.record.u_V, 0, v.record.t_s.size());
+    v.record.point.frequency_Hz = est.frequency_Hz;
+    validations.push_back(std::move(v));
+  }
+  return validations;
+}
+
+/// One recording's frequency-response point; unreadable files become flagged points.
+FrequencyResponsePoint extract_from_file(const IdentArgs& a, const fs::path& file, std::optional<double>& Ts_seen,
+                                         Acquisition& acq, double& read_s) {
+  const double c0 = process_cpu_s();
+  Recording rec;
+  try {
+    rec = read_recording(file.string());
+  } catch (const std::exception& e) {
+    // Unusable file (gaps, non-uniform time, ...): flagged, excluded, reported.
+    FrequencyResponsePoint bad;
+    bad.source = file.filename().string();
+    bad.problem = e.what();
+    return bad;
+  }
+  read_s += process_cpu_s() - c0;
+  if (Ts_seen && std::abs(*Ts_seen - rec.sample_time_s) > 1e-3 * *Ts_seen)
+    throw std::runtime_error(file.string() + ": sample time " + format("%g", rec.sample_time_s) +
+                             " s differs from the other recordings' " + format("%g", *Ts_seen) + " s");
+  Ts_seen = rec.sample_time_s;
+  ExtractionOptions eo;
+  eo.settle_s = header_number(rec, "settle_s", a.settle_s);
+  eo.min_periods = a.min_periods;
+  const double c1 = process_cpu_s();
+  auto p = extract_frequency_response(rec.col("t_s"), rec.col("u_V"), rec.col("y_um"), eo, file.filename().string());
+  acq.cpu_s += process_cpu_s() - c1;
+  if (p.valid && is_validation_target(a, p.amplitude_V, p.bias_V, p.frequency_Hz)) {
+    Validation v;  // an in-fit stand-in, replaced by held-out recordings when there are any
+    v.label = p.source;
+    v.record = to_record(rec);
+    v.record.point.frequency_Hz = p.frequency_Hz;
+    v.settle_s = eo.settle_s;
+    v.held_out = false;
+    acq.validations.push_back(std::move(v));
+  }
+  return p;
+}
+
+Acquisition acquire_from_recordings(const IdentArgs& a, std::ostream& out) {
+  Acquisition acq;
+  acq.sample_time_s = a.options.sample_time_s;
+  const auto files = csv_files(a.from);
+  out << "Recordings: " << files.size() << " in " << a.from << "\n";
+  double read_s = 0.0;
+  std::optional<double> Ts_seen;
+  for (size_t i = 0; i < files.size(); ++i) {
+    acq.points.push_back(extract_from_file(a, files[i], Ts_seen, acq, read_s));
+    const auto& p = acq.points.back();
+    if (a.quiet) continue;
+    if (!p.valid && p.frequency_Hz == 0.0)
+      std::fprintf(stderr, "[%zu/%zu] %s: FLAGGED: %s\n", i + 1, files.size(), p.source.c_str(), p.problem.c_str());
+    else
+      std::fprintf(stderr, "[%zu/%zu] %s: A = %.1f V, B = %.1f V, f = %.4f Hz, |H| = %.5f um/V%s\n", i + 1,
+                   files.size(), p.source.c_str(), p.amplitude_V, p.bias_V, p.frequency_Hz, p.gain(),
+                   p.valid ? "" : (" FLAGGED: " + p.problem).c_str());
+  }
+  if (Ts_seen) acq.sample_time_s = *Ts_seen;
+  out << format("Reading the recordings took %.2f s CPU (not counted below)\n", read_s);
+  const fs::path vdir = a.validation_dir.empty() ? fs::path(a.from) / "validation" : fs::path(a.validation_dir);
+  if (fs::is_directory(vdir)) acq.validations = held_out_recordings(vdir, a.settle_s);
+  else if (!a.validation_dir.empty())
+    throw std::runtime_error("--validation-dir: '" + a.validation_dir + "' is not a directory");
+  return acq;
+}
+
+/// The experiments run on the rig and are kept as recordings; the fit is then
+/// exactly that of `--from` on them.
+IdentOutcome run_on_rig(const IdentArgs& a) {
+  ClientOptions o;
+  o.rig = a.rig;
+  o.domain = a.domain;
+  o.dds_config = a.dds_config;
+  if (o.dds_config.empty())
+    if (const char* env = std::getenv("PVCGEL_DDS_CONFIG")) o.dds_config = env;
+  char stamp[32];
+  const std::time_t now = std::time(nullptr);
+  std::strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%S", std::gmtime(&now));
+  const fs::path dir = a.save_recordings.empty() ? fs::path("ident-" + a.rig + "-" + stamp) : fs::path(a.save_recordings);
+  const std::string rig_line = run_plan_on_rig(a, o, dir);
+  IdentArgs b = a;
+  b.rig.clear();
+  b.save_recordings.clear();
+  b.from = dir.string();
+  IdentOutcome fitted = run_ident(b);
+  fitted.summary = rig_line + fitted.summary;
+  return fitted;
+}
+
+void describe_points(const IdentificationResult& r, const IdentificationOptions& io, std::ostream& out) {
   out << "\nFrequency responses (fundamental; phase and |H| with the " << io.io_delay_samples
       << "-sample I/O delay and the ZOH removed; sigma from the per-period spread; H2, H3 relative to H1)\n";
   out << "   A (V)   B (V)    f (Hz)  periods   |H| (um/V)  sigma (%)  phase (deg)   DC (um)   H2 (%)  H3 (%)  status\n";
@@ -440,10 +444,10 @@ IdentOutcome run_ident(const IdentArgs& a) {
     }
     const auto h = r.continuous[i];
     const double h1 = p.harmonic_um.empty() ? NAN : p.harmonic_um[0];
-    out << fmt("  %6.1f  %6.1f  %8.4f  %7d  %11.6f  %9.3f  %11.2f  %8.3f  %7.3f %7.3f  ", p.amplitude_V, p.bias_V,
-               p.frequency_Hz, p.periods, std::abs(h), 100.0 * p.response_sigma / std::max(p.gain(), 1e-300),
-               std::arg(h) * 180 / kPi, p.dc_um, p.harmonic_um.size() > 1 ? 100 * p.harmonic_um[1] / h1 : NAN,
-               p.harmonic_um.size() > 2 ? 100 * p.harmonic_um[2] / h1 : NAN);
+    out << format("  %6.1f  %6.1f  %8.4f  %7d  %11.6f  %9.3f  %11.2f  %8.3f  %7.3f %7.3f  ", p.amplitude_V,
+                  p.bias_V, p.frequency_Hz, p.periods, std::abs(h), 100.0 * p.response_sigma / std::max(p.gain(), 1e-300),
+                  std::arg(h) * 180 / kPi, p.dc_um, p.harmonic_um.size() > 1 ? 100 * p.harmonic_um[1] / h1 : NAN,
+                  p.harmonic_um.size() > 2 ? 100 * p.harmonic_um[2] / h1 : NAN);
     if (p.valid) out << (std::find(r.reference.begin(), r.reference.end(), i) != r.reference.end() ? "ref" : "ok");
     else {
       out << "FLAGGED, excluded: " << p.problem;
@@ -453,137 +457,201 @@ IdentOutcome run_ident(const IdentArgs& a) {
   }
   out << r.used.size() << " valid points, " << flagged << " flagged and excluded, " << r.reference.size()
       << " at the reference regime A = " << io.reference_amplitude_V << " V, B = " << io.reference_bias_V << " V\n";
+}
 
-  // --- G
+void describe_fits(const IdentificationResult& r, const IdentificationOptions& io, std::ostream& out) {
   const auto& g = r.G_fit;
   out << "\nG(s) (numerator order " << io.G.numerator_order << ", denominator order " << io.G.denominator_order
-      << "; Levy/SK " << g.sk_iterations << " iterations, fit " << fmt("%.2f", g.sk_fit_percent)
+      << "; Levy/SK " << g.sk_iterations << " iterations, fit " << format("%.2f", g.sk_fit_percent)
       << "%, then Levenberg-Marquardt: " << g.lm_status << ")\n";
   out << "  G(s) = " << g.G.to_string() << "\n";
-  out << fmt("  fit %.3f%% (tfest measure), max relative error %.3f%%, DC gain %.6g um/V\n", g.fit_percent,
-             100 * g.max_relative_error, g.G.dc_gain());
+  out << format("  fit %.3f%% (tfest measure), max relative error %.3f%%, DC gain %.6g um/V\n", g.fit_percent,
+                100 * g.max_relative_error, g.G.dc_gain());
   out << "  poles: " << roots_text(g.poles) << "\n  zeros: " << roots_text(g.zeros) << "\n";
   out << "  normalisation: " << kNormalisation << "\n";
-
-  // --- f
   out << "\nNonlinearity f (paper eq. (10), d = measured gain / |G(jw)| per valid grid point)\n";
   out << "   n   ||Hc - d||   relative   vs n-1    monotone on [0, " << io.f.voltage_max_V << "] V   c\n";
   for (const auto& c : r.f_fit.candidates) {
     std::string vs = "";
-    if (c.terms > 1) vs = fmt("%+.1f%%", 100.0 * (c.residual_norm / r.f_fit.candidate(c.terms - 1).residual_norm - 1.0));
-    out << fmt("  %2d  %11.5g  %9.5f  %8s    %-28s", c.terms, c.residual_norm, c.relative_residual, vs.c_str(),
-               c.monotone() ? "yes" : fmt("no: turns over at %.1f V", *c.turnover_V).c_str())
-        << join(c.c) << "\n";
+    if (c.terms > 1)
+      vs = format("%+.1f%%", 100.0 * (c.residual_norm / r.f_fit.candidate(c.terms - 1).residual_norm - 1.0));
+    out << format("  %2d  %11.5g  %9.5f  %8s    %-28s", c.terms, c.residual_norm, c.relative_residual, vs.c_str(),
+                  c.monotone() ? "yes" : format("no: turns over at %.1f V", *c.turnover_V).c_str())
+        << toml_array(c.c) << "\n";
   }
-  out << "  chosen n = " << r.f_fit.chosen_terms << ": " << r.f_fit.rule << "\n";
+  out << "  frequency-domain rule: n = " << r.f_fit.chosen_terms << ": " << r.f_fit.rule << "\n";
+}
 
-  // --- truth (simulation only)
-  if (rig_cfg) {
-    const auto& truth = rig_cfg->truth;
-    out << "\nAgainst the simulated truth (f = " << join(truth.f.coefficients()) << ", G = " << truth.G.to_string() << ")\n";
-    const auto p = sorted_roots(g.poles), pt = sorted_roots(truth.G.poles());
-    for (size_t i = 0; i < std::min(p.size(), pt.size()); ++i)
-      out << fmt("  pole %.4f vs %.4f: %.3f%%\n", p[i].real(), pt[i].real(), 100 * std::abs(p[i] - pt[i]) / std::abs(pt[i]));
-    const auto z = sorted_roots(g.zeros), zt = sorted_roots(truth.G.zeros());
-    for (size_t i = 0; i < std::min(z.size(), zt.size()); ++i)
-      out << fmt("  zero %.4f vs %.4f: %.3f%%\n", z[i].real(), zt[i].real(), 100 * std::abs(z[i] - zt[i]) / std::abs(zt[i]));
-    const double Nref = truth.f.describing_function(io.reference_amplitude_V, io.reference_bias_V);
-    std::vector<double> ct = truth.f.coefficients();
-    for (auto& c : ct) c *= Nref;
-    out << "  truth in this normalisation: c = " << join(ct) << " (c_true x N_true(A_ref, B_ref) = " << fmt("%.5g", Nref)
-        << "), G_true / " << fmt("%.5g", Nref) << "\n";
-    for (const auto& c : r.f_fit.candidates) {
-      const auto m = r.model(c.terms);
-      double worst = 0.0;
-      for (size_t i : r.used) {
-        const auto& q = r.points[i];
-        const double gt = control::identification::overall_gain(truth, q.amplitude_V, q.bias_V, q.omega_rad_s());
-        worst = std::max(worst, std::abs(control::identification::overall_gain(m, q.amplitude_V, q.bias_V, q.omega_rad_s()) - gt) / gt);
-      }
-      out << fmt("  n = %d: max |overall gain N(A,B)|G(jw)| - truth's| over the grid: %.3f%%%s\n", c.terms, 100 * worst,
-                 c.terms == truth.f.terms() ? "  (n of the truth)" : "");
+void describe_against_truth(const IdentificationResult& r, const IdentificationOptions& io,
+                            const control::SimRigConfig& rig, std::ostream& out) {
+  const auto& truth = rig.truth;
+  out << "\nAgainst the simulated truth (f = " << toml_array(truth.f.coefficients()) << ", G = " << truth.G.to_string()
+      << ")\n";
+  const auto p = sorted_roots(r.G_fit.poles), pt = sorted_roots(truth.G.poles());
+  for (size_t i = 0; i < std::min(p.size(), pt.size()); ++i)
+    out << format("  pole %.4f vs %.4f: %.3f%%\n", p[i].real(), pt[i].real(), 100 * std::abs(p[i] - pt[i]) / std::abs(pt[i]));
+  const auto z = sorted_roots(r.G_fit.zeros), zt = sorted_roots(truth.G.zeros());
+  for (size_t i = 0; i < std::min(z.size(), zt.size()); ++i)
+    out << format("  zero %.4f vs %.4f: %.3f%%\n", z[i].real(), zt[i].real(), 100 * std::abs(z[i] - zt[i]) / std::abs(zt[i]));
+  const double Nref = truth.f.describing_function(io.reference_amplitude_V, io.reference_bias_V);
+  std::vector<double> ct = truth.f.coefficients();
+  for (auto& c : ct) c *= Nref;
+  out << "  truth in this normalisation: c = " << toml_array(ct) << " (c_true x N_true(A_ref, B_ref) = "
+      << format("%.5g", Nref) << "), G_true / " << format("%.5g", Nref) << "\n";
+  for (const auto& c : r.f_fit.candidates) {
+    const auto m = r.model(c.terms);
+    double worst = 0.0;
+    for (size_t i : r.used) {
+      const auto& q = r.points[i];
+      const double gt = overall_gain(truth, q.amplitude_V, q.bias_V, q.omega_rad_s());
+      worst = std::max(worst, std::abs(overall_gain(m, q.amplitude_V, q.bias_V, q.omega_rad_s()) - gt) / gt);
     }
+    out << format("  n = %d: max |overall gain N(A,B)|G(jw)| - truth's| over the grid: %.3f%%%s\n", c.terms,
+                  100 * worst, c.terms == truth.f.terms() ? "  (n of the truth)" : "");
   }
+}
 
-  // --- validation
+/// Predicts every validation record with every n and prints the metrics.
+void validate_in_time(std::vector<Validation>& validations, const IdentificationResult& r,
+                      const IdentificationOptions& io, std::ostream& out) {
+  if (validations.empty()) return;
   const int max_n = static_cast<int>(r.f_fit.candidates.size());
-  if (!validations.empty()) {
-    out << "\nTime-domain validation (model driven by the recorded u with ZOH and the I/O delay, from its steady state "
-           "at u[0]; metrics after the settling time)\n";
-    for (auto& v : validations) {
-      const auto begin = static_cast<size_t>(std::llround(v.settle_s / v.record.sample_time_s));
-      if (begin >= v.record.t_s.size()) continue;
-      out << "  " << v.label << (v.held_out ? " (held out)" : " (also in the fit data: no held-out recordings)") << "\n";
-      for (int n = 1; n <= max_n; ++n) {
-        v.prediction.push_back(simulate_hammerstein(r.model(n), v.record.u_V, v.record.sample_time_s, io.io_delay_samples));
-        v.metrics.push_back(prediction_metrics(v.record.y_um, v.prediction.back(), begin, v.record.t_s.size()));
-        const auto& m = v.metrics.back();
-        out << fmt("    n = %d: NRMSE %.4f, rms %.3f um, max %.3f um, mean offset %+.3f um\n", n, m.nrmse,
-                   m.rms_error_um, m.max_error_um, m.mean_error_um);
-      }
+  out << "\nTime-domain validation (model driven by the recorded u with ZOH and the I/O delay, from its steady state "
+         "at u[0]; metrics after the settling time)\n";
+  for (auto& v : validations) {
+    const auto begin = static_cast<size_t>(std::llround(v.settle_s / v.record.sample_time_s));
+    if (begin >= v.record.t_s.size()) continue;
+    out << "  " << v.label << (v.held_out ? " (held out)" : " (also in the fit data: no held-out recordings)") << "\n";
+    for (int n = 1; n <= max_n; ++n) {
+      v.prediction.push_back(simulate_hammerstein(r.model(n), v.record.u_V, v.record.sample_time_s, io.io_delay_samples));
+      v.metrics.push_back(prediction_metrics(v.record.y_um, v.prediction.back(), begin, v.record.t_s.size()));
+      const auto& m = v.metrics.back();
+      out << format("    n = %d: NRMSE %.4f, rms %.3f um, max %.3f um, mean offset %+.3f um\n", n, m.nrmse,
+                    m.rms_error_um, m.max_error_um, m.mean_error_um);
     }
   }
-  out << fmt("\nCPU time for extraction and fits (%zu points): %.3f s\n", r.points.size(), cpu);
+}
 
-  const std::string problem = g.control_problem();
+/// Chooses n by held-out time-domain validation (the frequency-domain rule when
+/// there is no held-out data or n was forced) and prints both rules' picks.
+ModelChoice choose_model(const IdentArgs& a, const std::vector<Validation>& validations, IdentificationResult& r,
+                         std::ostream& out) {
+  std::vector<std::vector<PredictionMetrics>> metrics;
+  for (const auto& v : validations)
+    if (v.held_out && !v.metrics.empty()) metrics.push_back(v.metrics);
+  ModelChoiceOptions o;
+  for (size_t i : r.used) o.highest_bias_V = std::max(o.highest_bias_V, r.points[i].bias_V);
+  out << "\nChoice of n (frequency-domain rule above: n = " << r.f_fit.chosen_terms << ")\n";
+  ModelChoice choice;
+  if (a.options.f.forced_terms || metrics.empty()) {
+    choice.terms = r.f_fit.chosen_terms;
+    choice.rule = a.options.f.forced_terms ? r.f_fit.rule : "no held-out recordings: " + r.f_fit.rule;
+    if (const auto turn = r.f_fit.chosen().turnover_V) choice.voltage_max_V = std::floor(0.98 * *turn);
+  } else {
+    choice = choose_by_validation(r.f_fit, metrics, o);
+  }
+  out << "  held-out time-domain rule: n = " << choice.terms << ": " << choice.rule << "\n  chosen: n = "
+      << choice.terms;
+  if (choice.voltage_max_V) out << format(", with controller.voltage_max_V = %.0f V", *choice.voltage_max_V);
+  out << "\n";
+  r.f_fit.chosen_terms = choice.terms;
+  return choice;
+}
+
+void write_model(const IdentArgs& a, const IdentificationResult& r, const IdentificationOptions& io,
+                 const ModelChoice& choice, std::ostream& out) {
+  const auto model = r.chosen_model();
+  std::string comment =
+      "pvcgel ident: " + (a.sim ? std::string("simulated rig") : "recordings in " + a.from) +
+      "\nn = " + std::to_string(choice.terms) + ": " + choice.rule + "\nfrequency-domain rule: " + r.f_fit.rule +
+      "\nnormalisation: N(A_ref = " + format("%g", io.reference_amplitude_V) + " V, B_ref = " +
+      format("%g", io.reference_bias_V) + " V) = 1 for the fit of G; f carries the scale" +
+      "\nconventions: f maps the amplifier voltage u (V) to the linear block's input; G maps that to the "
+      "displacement y (um), coefficients in descending powers of s; u[k] is applied at the cycle after y[k] is "
+      "measured and held (zero-order hold), plus io_delay_samples whole samples of I/O delay, which the fit removed";
+  std::string text = model_toml(model, comment) + format("io_delay_samples = %d\n", io.io_delay_samples);
+  if (choice.voltage_max_V)
+    text += format("\n# f turns over above this: the inverse controller needs f strictly increasing up to the limit\n"
+                   "[controller]\nvoltage_max_V = %.0f\n",
+                   *choice.voltage_max_V);
+  // The file must be what the daemon accepts: parse it back (model and controller) before writing.
+  try {
+    (void)control::parse_configuration(toml::parse(text), a.out);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("internal: the model file does not parse back: ") + e.what());
+  }
+  write_text_file(a.out, text);
+  out << "wrote " << a.out << " (n = " << choice.terms << ")\n";
+}
+
+void write_report(const IdentArgs& a, const IdentificationResult& r, const IdentificationOptions& io,
+                  const std::vector<Validation>& validations, const std::string& results, std::ostream& out) {
+  const fs::path dir(a.report);
+  fs::create_directories(dir);
+  const int max_n = static_cast<int>(r.f_fit.candidates.size());
+  plot_bode(r, dir);
+  plot_gains(r, dir);
+  plot_validation(validations, max_n, dir);
+  std::ostringstream md;
+  md << "# pvcgel ident report\n\nSource: " << (a.sim ? "simulated rig" : "recordings in `" + a.from + "`")
+     << ".\n\n## Method\n\n"
+     << "- Extraction: fundamental (and harmonics 2..5, DC, linear drift) by least squares over the last whole "
+        "periods after the settling time; A, B and f estimated from `u_V` (four-parameter sine fit). Uncertainty: "
+        "spread of per-period estimates / sqrt(periods). Points with too few periods, a clipped or distorted input "
+        "or an unreadable file are flagged and excluded.\n"
+     << "- Sampling: the measured discrete response includes the zero-order hold and the rig's I/O delay ("
+     << io.io_delay_samples << " sample(s), a configured fact of the rig); both are removed (e^{+jw(d+1/2)Ts} / sinc) "
+        "before fitting the continuous G(s).\n"
+     << "- G(s): Levy / Sanathanan-Koerner, then Levenberg-Marquardt on the relative complex error, at the "
+        "reference regime.\n"
+     << "- Normalisation: " << kNormalisation << "\n"
+     << "- f: paper eq. (10) for n = 1.." << max_n << "; frequency-domain rule: " << r.f_fit.rule << ".\n"
+     << "- n used: the smallest whose mean held-out time-domain NRMSE is within 5% of the best; a degree whose f "
+        "turns over below 1000 V comes with `controller.voltage_max_V` just below the turnover (see Results).\n\n"
+     << "## Results\n\n```\n" << results << "```\n\n## Plots\n\n"
+     << "- Fig. 6 analogue: ![bode](bode.png)\n";
+  for (const auto& c : r.f_fit.candidates)
+    md << "- Figs. 7-9 analogue, n = " << c.terms << ": ![gain n=" << c.terms << "](gain_n" << c.terms << ".png)\n";
+  if (!validations.empty()) md << "- Fig. 10 analogue: ![validation](validation.png)\n";
+  write_text_file(dir / "report.md", md.str());
+  out << "wrote " << (dir / "report.md").string() << " and plots\n";
+}
+
+}  // namespace
+
+IdentRefused::IdentRefused(const std::string& why, std::string summary_text)
+    : std::runtime_error(why + "; no model written"), summary(std::move(summary_text)) {}
+
+IdentOutcome run_ident(const IdentArgs& a) {
+  if (static_cast<int>(a.sim) + static_cast<int>(!a.from.empty()) + static_cast<int>(!a.rig.empty()) != 1)
+    throw std::runtime_error("give exactly one of --sim, --from DIR or --rig ID");
+  if (!a.save_recordings.empty() && a.sim + !a.rig.empty() == 0)
+    throw std::runtime_error("--save-recordings needs --sim or --rig");
+  if (!a.rig.empty()) return run_on_rig(a);
+
+  std::ostringstream out;
+  Acquisition acq = a.sim ? acquire_from_sim(a, out) : acquire_from_recordings(a, out);
+  IdentificationOptions io = a.options;
+  io.sample_time_s = acq.sample_time_s;
+  const double c0 = process_cpu_s();
+  IdentOutcome outcome{identify(acq.points, io), "", 0.0, false};
+  outcome.cpu_extract_fit_s = acq.cpu_s + process_cpu_s() - c0;
+  const auto& r = outcome.result;
+  describe_points(r, io, out);
+  describe_fits(r, io, out);
+  if (acq.truth) describe_against_truth(r, io, *acq.truth, out);
+  validate_in_time(acq.validations, outcome.result, io, out);
+  const ModelChoice choice = choose_model(a, acq.validations, outcome.result, out);
+  out << format("\nCPU time for extraction and fits (%zu points): %.3f s\n", r.points.size(), outcome.cpu_extract_fit_s);
+  const std::string problem = r.G_fit.control_problem();
   if (!problem.empty()) out << "\nREFUSED: " << problem << "\n";
-
-  IdentOutcome outcome{std::move(r), "", cpu, false};
-  const auto& res = outcome.result;
   if (problem.empty() && !a.out.empty()) {
-    const auto model = res.chosen_model();
-    std::string comment = "pvcgel ident: " + (a.sim ? std::string("simulated rig") : "recordings in " + a.from) +
-                          "\nn = " + std::to_string(res.f_fit.chosen_terms) + ": " + res.f_fit.rule +
-                          "\nnormalisation: N(A_ref = " + fmt("%g", io.reference_amplitude_V) + " V, B_ref = " +
-                          fmt("%g", io.reference_bias_V) + " V) = 1 for the fit of G; f carries the scale";
-    if (const auto turn = model.f.first_turnover(1000.0))
-      comment += fmt("\nWARNING: f turns over at %.1f V: set controller.voltage_max_V below that", *turn);
-    const std::string text = model_toml(model, comment);
-    // The file must be what the daemon accepts: parse it back before writing.
-    try {
-      (void)control::parse_model(toml::parse(text), a.out);
-    } catch (const std::exception& e) {
-      throw std::runtime_error(std::string("internal: the model file does not parse back: ") + e.what());
-    }
-    if (fs::path(a.out).has_parent_path()) fs::create_directories(fs::path(a.out).parent_path());
-    write_file(a.out, text);
+    write_model(a, r, io, choice, out);
     outcome.model_written = true;
-    out << "wrote " << a.out << " (n = " << res.f_fit.chosen_terms << ")\n";
   }
-
-  if (!a.report.empty()) {
-    const fs::path dir(a.report);
-    fs::create_directories(dir);
-    plot_bode(res, dir);
-    plot_gains(res, dir);
-    plot_validation(validations, max_n, dir);
-    std::ostringstream md;
-    md << "# pvcgel ident report\n\nSource: " << (a.sim ? "simulated rig" : "recordings in `" + a.from + "`")
-       << ".\n\n## Method\n\n"
-       << "- Extraction: fundamental (and harmonics 2..5, DC, linear drift) by least squares over the last whole "
-          "periods after the settling time; A, B and f estimated from `u_V` (four-parameter sine fit). Uncertainty: "
-          "spread of per-period estimates / sqrt(periods). Points with too few periods, a clipped or distorted input "
-          "or an unreadable file are flagged and excluded.\n"
-       << "- Sampling: the measured discrete response includes the zero-order hold and the rig's I/O delay ("
-       << io.io_delay_samples << " sample(s), a configured fact of the rig); both are removed (e^{+jw(d+1/2)Ts} / sinc) "
-          "before fitting the continuous G(s).\n"
-       << "- G(s): Levy / Sanathanan-Koerner, then Levenberg-Marquardt on the relative complex error, at the "
-          "reference regime.\n"
-       << "- Normalisation: " << kNormalisation << "\n"
-       << "- f: paper eq. (10) for n = 1.." << max_n << "; rule: " << res.f_fit.rule << ".\n\n"
-       << "## Results\n\n```\n" << out.str() << "```\n\n## Plots\n\n"
-       << "- Fig. 6 analogue: ![bode](bode.png)\n";
-    for (const auto& c : res.f_fit.candidates)
-      md << "- Figs. 7-9 analogue, n = " << c.terms << ": ![gain n=" << c.terms << "](gain_n" << c.terms << ".png)\n";
-    if (!validations.empty()) md << "- Fig. 10 analogue: ![validation](validation.png)\n";
-    write_file(dir / "report.md", md.str());
-    out << "wrote " << (dir / "report.md").string() << " and plots\n";
-  }
+  if (!a.report.empty()) write_report(a, r, io, acq.validations, out.str(), out);
   outcome.summary = out.str();
-  if (!problem.empty()) {
-    std::cout << outcome.summary << std::flush;
-    throw std::runtime_error(problem + "; no model written");
-  }
+  if (!problem.empty()) throw IdentRefused(problem, outcome.summary);
   return outcome;
 }
 
@@ -596,7 +664,7 @@ void add_ident_command(CLI::App& app) {
   c->add_option("--dds-config", a->dds_config, "--rig: Cyclone DDS XML (default $PVCGEL_DDS_CONFIG)");
   c->add_option("--from", a->from, "directory of recordings (*.csv, pvcgeld format), one sine experiment each");
   c->add_option("--validation-dir", a->validation_dir, "held-out recordings for time-domain validation (default FROM/validation)");
-  c->add_option("--out", a->out, "write the [model] table (poly, G_num, G_den) to FILE");
+  c->add_option("--out", a->out, "write the model file to FILE: [model] (poly, G_num, G_den, io_delay_samples), and [controller] voltage_max_V when f turns over below 1000 V");
   c->add_option("--report", a->report, "write report.md and PNG plots to DIR");
   c->add_option("--save-recordings", a->save_recordings,
                 "--sim: also write every experiment as a recording to DIR; --rig: where the recordings go "
@@ -630,8 +698,12 @@ void add_ident_command(CLI::App& app) {
   c->add_flag("--quiet", a->quiet, "no progress lines");
   c->callback([a, nopt] {
     if (nopt->count()) a->options.f.forced_terms = nopt->as<int>();
-    const auto o = run_ident(*a);
-    std::cout << o.summary << std::flush;
+    try {
+      std::cout << run_ident(*a).summary << std::flush;
+    } catch (const IdentRefused& refused) {
+      std::cout << refused.summary << std::flush;  // the numbers that led to the refusal
+      throw;
+    }
   });
 }
 

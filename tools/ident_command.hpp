@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -49,9 +50,17 @@ struct IdentOutcome {
   bool model_written = false;
 };
 
+/// The fitted G cannot be controlled (e.g. unstable, non-minimum phase): no
+/// model is written. `summary` holds the analysis that shows why.
+struct IdentRefused : std::runtime_error {
+  IdentRefused(const std::string& why, std::string summary_text);
+  std::string summary;
+};
+
 /// Runs the identification the way the command line does.
-/// @throws std::runtime_error with a user-facing message (e.g. --rig, unreadable
-///         directory, too few valid points, a G refused for control).
+/// @throws IdentRefused when G is refused for control;
+///         std::runtime_error with a user-facing message otherwise (e.g. --rig,
+///         unreadable directory, too few valid points).
 IdentOutcome run_ident(const IdentArgs& args);
 
 /// The `[model]` table the daemon reads (`poly`, `G_num`, `G_den`), with `#` comment lines first.

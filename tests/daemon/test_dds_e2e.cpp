@@ -366,8 +366,14 @@ TEST(DdsE2E, IdentificationOnARunningRigOverDds) {
   // The daemon takes the written [model] as it is.
   std::string cfg = test::slurp(write_config("ident_model", kDomain, "ident"));
   const std::string model_text = test::slurp(model);
-  cfg = std::regex_replace(cfg, std::regex(R"(\[model\][\s\S]*?\n\[controller\])"),
-                           model_text.substr(model_text.find("[model]")) + "io_delay_samples = 1\n\n[controller]");
+  // Its [model] table replaces the config's, and a voltage limit it carries (f
+  // turning over below 1000 V) replaces the config's controller.voltage_max_V.
+  std::smatch table;
+  ASSERT_TRUE(std::regex_search(model_text, table, std::regex(R"(\[model\][\s\S]*?(?=\n\[|$))"))) << model_text;
+  cfg = std::regex_replace(cfg, std::regex(R"(\[model\][\s\S]*?\n\[controller\])"), table.str() + "\n\n[controller]");
+  std::smatch limit;
+  if (std::regex_search(model_text, limit, std::regex(R"(\nvoltage_max_V = ([\d.]+))")))
+    cfg = std::regex_replace(cfg, std::regex(R"(\nvoltage_max_V = [\d.]+)"), "\nvoltage_max_V = " + limit[1].str());
   const std::string cfg_path = ::testing::TempDir() + "ident_model_daemon.toml";
   std::ofstream(cfg_path) << cfg;
   const auto check = run_program(kDaemon, {"--config", cfg_path, "--check-config"});

@@ -54,11 +54,21 @@ TEST(IdentCommand, SimulatedRigEndToEndWritesAModelTheParserAccepts) {
   EXPECT_EQ(cfg.model.f.terms(), o.result.f_fit.chosen_terms);
   ASSERT_EQ(cfg.model.G.den().size(), 3u);
   for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(cfg.model.G.den()[i], o.result.G_fit.G.den()[i], 1e-8 * o.result.G_fit.G.den()[i]);
-  EXPECT_FALSE(cfg.model.f.first_turnover(1000.0).has_value());
-  // Exactly the three keys the daemon reads, under [model].
+  // The truth is the paper's n = 3: the held-out time responses pick it (the
+  // frequency-domain rule alone would keep n = 2), and its turnover (862 V in
+  // the truth) comes with a voltage limit just below it, never silently.
+  EXPECT_EQ(o.result.f_fit.chosen_terms, 3) << o.summary;
+  const auto turn = cfg.model.f.first_turnover(1000.0);
+  ASSERT_TRUE(turn.has_value());
+  EXPECT_NEAR(*turn, 862.0, 862.0 * 0.03);
+  EXPECT_LT(cfg.controller.voltage_max_V, *turn);
+  EXPECT_GT(cfg.controller.voltage_max_V, 0.95 * *turn);
+  // The keys the daemon reads under [model], the I/O delay stated, and the limit.
   ASSERT_TRUE(root["model"].is_table());
-  EXPECT_EQ(root["model"].as_table()->size(), 3u);
-  EXPECT_EQ(root.size(), 1u);
+  EXPECT_EQ(root["model"].as_table()->size(), 4u);
+  EXPECT_EQ(root["model"]["io_delay_samples"].value<int64_t>(), 1);
+  EXPECT_EQ(root.size(), 2u);
+  EXPECT_NE(o.summary.find("held-out time-domain rule: n = 3"), std::string::npos) << o.summary;
   EXPECT_NE(o.summary.find("CPU time for extraction and fits"), std::string::npos);
 
   // The same experiments read back from the recordings give the same model.
@@ -177,7 +187,7 @@ TEST(IdentCommand, ReportAndPlots) {
   std::ifstream md(dir / "report.md");
   const std::string text((std::istreambuf_iterator<char>(md)), {});
   EXPECT_NE(text.find("Normalisation"), std::string::npos);
-  EXPECT_NE(text.find("chosen n"), std::string::npos);
+  EXPECT_NE(text.find("chosen: n = "), std::string::npos);
   fs::remove_all(dir);
 }
 

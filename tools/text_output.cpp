@@ -1,0 +1,30 @@
+#include "tools/text_output.hpp"
+
+#include <cmath>
+#include <ctime>
+#include <fstream>
+#include <stdexcept>
+
+namespace pvcgel::tools {
+
+std::string json_number(double value, const char* printf_format) {
+  return std::isfinite(value) ? format(printf_format, value) : "null";
+}
+
+std::string toml_array(const std::vector<double>& values) {
+  std::string s = "[";
+  for (size_t i = 0; i < values.size(); ++i) s += (i ? ", " : "") + format("%.10g", values[i]);
+  return s + "]";
+}
+
+void write_text_file(const std::filesystem::path& path, const std::string& text) {
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error("cannot write " + path.string());
+  f << text;
+  if (!f.flush()) throw std::runtime_error("write failed: " + path.string());
+}
+
+double process_cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+}  // namespace pvcgel::tools

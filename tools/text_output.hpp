@@ -1,0 +1,34 @@
+#pragma once
+/// @file
+/// Formatting and file writing shared by the `pvcgel` subcommands: one copy of
+/// each, so every report, model file and message prints numbers the same way.
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace pvcgel::tools {
+
+/// printf-style formatting into a string (at most 511 characters).
+template <typename... Args>
+std::string format(const char* printf_format, Args... values) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, printf_format, values...);
+  return buf;
+}
+
+/// A number for JSON: `printf_format` applied, or `null` when not finite.
+std::string json_number(double value, const char* printf_format = "%.6g");
+
+/// A TOML array of numbers with 10 significant digits: `[0.127, 1.3057e-05]`.
+std::string toml_array(const std::vector<double>& values);
+
+/// Writes `text` to `path`, creating its parent directories.
+/// @throws std::runtime_error naming the path when it cannot be written.
+void write_text_file(const std::filesystem::path& path, const std::string& text);
+
+/// CPU time of this process in seconds (what speed targets are about, not wall time).
+double process_cpu_s();
+
+}  // namespace pvcgel::tools
