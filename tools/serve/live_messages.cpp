@@ -131,7 +131,7 @@ std::string state_name(std::uint8_t v) {
 }
 
 std::string fault_name(std::uint8_t v) {
-  if (v > static_cast<std::uint8_t>(daemon::FaultReason::hal_error)) return unknown(v);
+  if (v >= static_cast<std::uint8_t>(daemon::FaultReason::count_)) return unknown(v);
   return std::string(daemon::to_string(static_cast<daemon::FaultReason>(v)));
 }
 
