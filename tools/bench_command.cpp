@@ -51,7 +51,7 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
       f << '\n';
     }
     f.close();
-    std::string gp = "set terminal pngcairo size 1100,800 font ',10'\nset output '" + (dir / (rr.name + ".png")).string() +
+    std::string gp = "set terminal pngcairo noenhanced size 1100,800 font ',10'\nset output '" + (dir / (rr.name + ".png")).string() +
                      "'\nset multiplot layout 2,1 title 'Paper reference " + rr.name +
                      " on the simulated paper rig'\nset grid\nset xlabel 't (s)'\n";
     gp += "set ylabel 'displacement (um)'\nset key outside right\nplot '" + dat.string() +
@@ -133,7 +133,7 @@ void run_paper(const PaperArgs& a) {
       fs::create_directories(a.plot_dir);
       const fs::path d = fs::path(a.plot_dir) / "sweep.dat";
       write_text_file(d, dat);
-      std::string gp = "set terminal pngcairo size 1100,800 font ',10'\nset output '" +
+      std::string gp = "set terminal pngcairo noenhanced size 1100,800 font ',10'\nset output '" +
                        (fs::path(a.plot_dir) / "sweep.png").string() +
                        "'\nset multiplot layout 2,2 title 'Mean tracking error vs PID crossover target'\n"
                        "set logscale xy\nset grid\nset xlabel 'crossover (rad/s)'\nset ylabel 'mean |e| (um)'\n";

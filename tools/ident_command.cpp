@@ -110,7 +110,7 @@ void plot_bode(const IdentificationResult& r, const fs::path& dir) {
   m.close();
   g.close();
   std::ostringstream gp;
-  gp << "set terminal pngcairo size 900,900 font ',10'\nset output '" << (dir / "bode.png").string() << "'\n"
+  gp << "set terminal pngcairo noenhanced size 900,900 font ',10'\nset output '" << (dir / "bode.png").string() << "'\n"
      << "set multiplot layout 2,1 title 'Frequency response at the reference regime: measured vs identified G(s) (like Fig. 6)'\n"
      << "set logscale x\nset grid\nset xlabel 'frequency (Hz)'\nset logscale y\nset ylabel 'magnitude (um/V)'\n"
      << "plot '" << meas.string() << "' u 1:2:3 w yerrorbars pt 7 lc rgb 'black' t 'measured', '" << model.string()
@@ -134,7 +134,7 @@ void plot_gains(const IdentificationResult& r, const fs::path& dir) {
     const auto model = r.model(n);
     std::ostringstream gp;
     const fs::path png = dir / ("gain_n" + std::to_string(n) + ".png");
-    gp << "set terminal pngcairo size 1500,500 font ',10'\nset output '" << png.string() << "'\n"
+    gp << "set terminal pngcairo noenhanced size 1500,500 font ',10'\nset output '" << png.string() << "'\n"
        << "set multiplot layout 1," << biases.size() << " title 'Overall gain N(A,B)|G(jw)|: measured (M, points) vs model (E, lines), n = "
        << n << " (like Figs. 7-9)'\nset logscale xy\nset grid\nset xlabel 'frequency (Hz)'\nset ylabel 'gain (um/V)'\nset key bottom left\n";
     for (const auto& [B, unused] : biases) {
@@ -170,7 +170,7 @@ void plot_validation(const std::vector<Validation>& vals, int max_n, const fs::p
   if (vals.empty()) return;
   const char* colors[] = {"#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"};
   std::ostringstream gp;
-  gp << "set terminal pngcairo size 1100," << 420 * vals.size() << " font ',10'\nset output '"
+  gp << "set terminal pngcairo noenhanced size 1100," << 420 * vals.size() << " font ',10'\nset output '"
      << (dir / "validation.png").string() << "'\nset multiplot layout " << vals.size()
      << ",1 title 'Time-domain validation: measured vs model prediction from the recorded u (like Fig. 10)'\n"
      << "set grid\nset xlabel 't (s)'\nset ylabel 'displacement (um)'\nset key outside right\n";

@@ -83,15 +83,16 @@ int show(const ShowArgs& a) {
   if (!a.plot.empty()) {
     namespace fs = std::filesystem;
     const fs::path png(a.plot);
-    const fs::path dat = fs::path(png).replace_extension(".dat");
-    const fs::path gp = fs::path(png).replace_extension(".gp");
+    const ScratchDirectory scratch("pvcgel-show");  // only the PNG is wanted
+    const fs::path dat = scratch.path() / "recording.dat";
+    const fs::path gp = scratch.path() / "plot.gp";
     std::ofstream f(dat);
     const size_t stride = std::max<size_t>(1, n / 20000);
     for (size_t k = 0; k < n; k += stride)
       f << t[k] << ' ' << y[k] << ' ' << (has_r ? rec.col("r_um")[k] : NAN) << ' ' << u[k] << '\n';
     f.close();
     std::ofstream g(gp);
-    g << "set terminal pngcairo size 1100,900 font ',10'\nset output '" << png.string() << "'\n"
+    g << "set terminal pngcairo noenhanced size 1100,900 font ',10'\nset output '" << png.string() << "'\n"
       << "set multiplot layout 3,1 title '" << fs::path(a.path).filename().string() << "'\nset grid\nset xlabel 't (s)'\n"
       << "set ylabel 'displacement (um)'\nplot '" << dat.string() << "' u 1:3 w l lw 2 lc rgb 'black' t 'reference', '' u 1:2 w l lc rgb '#1f77b4' t 'measured'\n"
       << "set ylabel 'r - y (um)'\nplot '" << dat.string() << "' u 1:($3-$2) w l lc rgb '#d62728' t 'tracking error'\n"

@@ -2,10 +2,13 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "support/subprocess.hpp"
 #include "tools/recording.hpp"
@@ -76,6 +79,17 @@ TEST(PvcgeldE2E, DurationRunExitsCleanlyWithTrackingError) {
   EXPECT_GT(running, 1500);
   // Bench: inverse_pid_dob at 0.5 Hz has max |e| 0.86 um; allow start-up residue.
   EXPECT_LT(worst, 2.0);
+
+  // The quick start's second half: `show --plot` writes the PNG and nothing else beside it.
+  const std::filesystem::path dir = ::testing::TempDir() + "e2e_show_plot";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto show = run_program(kClient, {"show", rec_path, "--plot", (dir / "duration.png").string()});
+  ASSERT_EQ(show.exit_code, 0) << show.err << show.out;
+  std::vector<std::string> files;
+  for (const auto& f : std::filesystem::directory_iterator(dir)) files.push_back(f.path().filename().string());
+  EXPECT_EQ(files, std::vector<std::string>{"duration.png"});
+  EXPECT_GT(std::filesystem::file_size(dir / "duration.png"), 10000u);
 }
 
 // Telemetry over DDS (loopback-only Cyclone configuration): a late-joining
