@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "control/toml_reader.hpp"
+#include "daemon/config_file.hpp"
 
 namespace pvcgel::daemon {
 
@@ -163,23 +164,8 @@ void parse_setpoints(control::TableReader& top, DaemonConfig& cfg) {
 }  // namespace
 
 DaemonConfig load_daemon_config(const std::string& path) {
-  if (std::filesystem::is_directory(path))
-    throw ConfigError("--config", "'" + path + "' is a directory, not a configuration file");
-  std::ifstream in(path, std::ios::binary);
   // Unreadable or unparsable files are configuration errors too (exit 2: systemd must not restart).
-  if (!in) throw ConfigError("--config", "cannot read configuration file '" + path + "'");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  const std::string text = buffer.str();
-
-  toml::table root;
-  try {
-    root = toml::parse(text, path);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream os;
-    os << path << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
-    throw ConfigError("--config", os.str());
-  }
+  const auto [root, text] = read_config_file(path, "--config");
 
   if (root.empty())
     throw ConfigError("--config", "'" + path + "' is empty (no table, no key); start from config/pvcgeld.toml or "

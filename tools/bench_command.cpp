@@ -12,6 +12,7 @@
 #include <toml++/toml.h>
 
 #include "control/config_parser.hpp"
+#include "daemon/config_file.hpp"
 
 #include "tools/gnuplot.hpp"
 #include "tools/paper_bench.hpp"
@@ -73,14 +74,7 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
 void run_paper(const PaperArgs& a) {
   PaperBenchOptions o;
   if (!a.config.empty()) {
-    toml::table root;
-    try {
-      root = toml::parse_file(a.config);
-    } catch (const toml::parse_error& e) {
-      std::ostringstream os;
-      os << a.config << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
-      throw std::runtime_error(os.str());
-    }
+    const toml::table root = daemon::read_config_file(a.config, "--config").root;
     const auto cfg = control::parse_configuration(root, a.config);
     o.model = cfg.model;
     o.rig = cfg.sim;

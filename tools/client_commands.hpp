@@ -5,11 +5,9 @@
 
 #include <CLI/CLI.hpp>
 
-namespace pvcgel::tools {
+#include "tools/exit_codes.hpp"
 
-/// Exit codes of the client subcommands (besides 0 and 1).
-inline constexpr int kExitNoDaemon = 3;  ///< no daemon / rig unknown
-inline constexpr int kExitRejected = 4;  ///< the daemon refused the command or chunk
+namespace pvcgel::tools {
 
 /// Adds the client subcommands to the app.
 void add_client_commands(CLI::App& app);

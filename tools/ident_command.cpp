@@ -18,6 +18,7 @@
 #include "control/config_error.hpp"
 #include "control/config_parser.hpp"
 #include "control/identification/model_selection.hpp"
+#include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/recording.hpp"
 #include "tools/text_output.hpp"
@@ -240,13 +241,8 @@ struct Acquisition {
 control::SimRigConfig sim_rig_config(const IdentArgs& a) {
   control::SimRigConfig cfg;
   if (!a.config.empty()) {
-    toml::table root;
-    try {
-      root = toml::parse_file(a.config);
-    } catch (const toml::parse_error& e) {
-      throw std::runtime_error(a.config + ": " + std::string(e.description()));
-    }
-    cfg = control::parse_configuration(root, a.config, {"loop", "hal", "safety", "run"}).sim;
+    const toml::table root = daemon::read_config_file(a.config, "--config").root;
+    cfg = control::parse_configuration(root, a.config, {"loop", "hal", "safety", "run", "dds", "setpoints"}).sim;
   }
   cfg.seed = a.seed;
   if (a.ideal) {

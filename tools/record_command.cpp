@@ -1,4 +1,5 @@
 #include "tools/record_command.hpp"
+#include "tools/exit_codes.hpp"
 
 #include <chrono>
 #include <csignal>
@@ -96,7 +97,7 @@ int record(const RecordArgs& a) {
   std::fprintf(stderr, "pvcgel record: %llu rows, %.3f s, sequence gaps %llu -> %s\n",
                static_cast<unsigned long long>(rows), last_t - first_t,
                static_cast<unsigned long long>(recorder->gaps()), a.out.c_str());
-  return recorder->gaps() == 0 ? 0 : 5;
+  return recorder->gaps() == 0 ? kExitOk : kExitRecordingGap;
 }
 
 }  // namespace

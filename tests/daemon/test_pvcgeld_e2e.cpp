@@ -216,3 +216,31 @@ INSTANTIATE_TEST_SUITE_P(
     [](const auto& p) { return std::string(p.param.name); });
 
 }  // namespace
+
+namespace {
+
+// One error policy for the tools (pvcgel --help lists it): the same mistake
+// gives the same exit code in every subcommand.
+TEST(PvcgelExitCodes, TheSameMistakeGivesTheSameCodeInEverySubcommand) {
+  const std::string bad_toml = ::testing::TempDir() + "exit_codes_bad.toml";
+  std::ofstream(bad_toml) << "[model\npoly = [0.1]\n";
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"ident", "--sim", "--config", bad_toml},
+        std::vector<std::string>{"bench", "paper", "--config", bad_toml}}) {
+    const auto r = run_program(kClient, args);
+    EXPECT_EQ(r.exit_code, 2) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find(bad_toml + ":1:"), std::string::npos) << r.err;
+  }
+  const auto daemon = run_program(kDaemon, {"--config", bad_toml, "--check-config"});
+  EXPECT_EQ(daemon.exit_code, 2) << daemon.err;
+  for (const std::vector<std::string>& args : {std::vector<std::string>{"ident", "--no-such-option"},
+                                               std::vector<std::string>{"show"}, std::vector<std::string>{}}) {
+    const auto r = run_program(kClient, args);
+    EXPECT_EQ(r.exit_code, 64) << r.err;
+  }
+  const auto help = run_program(kClient, {"--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.out.find("Exit codes (every subcommand)"), std::string::npos) << help.out;
+}
+
+}  // namespace
