@@ -82,20 +82,32 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   // The augmented model: a daemon configuration whose sim rig reproduces the fitted prediction.
   ASSERT_EQ(o.augmented_model_path, (dir / "predaugmented_model.toml").string());
   const auto cfg = daemon::load_daemon_config(o.augmented_model_path);
-  ASSERT_EQ(cfg.rig.sim.added_effect.kind, EffectKind::creep);
-  for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(cfg.rig.sim.added_effect.p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
+  ASSERT_EQ(cfg.rig.sim.added_effects.size(), 1u);
+  ASSERT_EQ(cfg.rig.sim.added_effects[0].kind, EffectKind::creep);
+  for (size_t i = 0; i < 3; ++i)
+    EXPECT_NEAR(cfg.rig.sim.added_effects[0].p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
   auto sim = cfg.rig.sim;
   sim.noise_sigma_um = sim.quantization_um = 0.0;
   control::SimulatedRig rig(sim);
   const auto& s = c.recordings[0];
-  AugmentedPlant plant(control::paper_model(3), 1, s.sample_time_s, o.result.effect);
+  // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effect.
+  auto truth = control::paper_model(3);
+  auto poly = truth.f.coefficients();
+  for (double& c : poly) c *= o.result.nominal_refit.gain;
+  truth.f = control::OddPolynomial(poly);
+  truth.G = time_scaled(truth.G, o.result.nominal_refit.time_scale);
+  ASSERT_EQ(cfg.rig.sim.io_delay_samples, std::lround(o.result.alignment.used_samples));
+  AugmentedPlant plant(truth, cfg.rig.sim.io_delay_samples, s.sample_time_s, o.result.effect);
   const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
+  const double offset_um = o.result.alignment.offset_um[0];
   rig.reset_steady_state(s.u_V[0]);
   double worst_rig = 0.0, worst_prediction = 0.0;
   for (size_t k = 0; k < s.u_V.size(); ++k) {
     worst_rig = std::max(worst_rig, std::abs(rig.true_displacement_um() - y_model[k]));
     // The diagnosis starts from the rest state the first samples imply: equal after its transient.
-    if (s.t_s[k] > 10.0) worst_prediction = std::max(worst_prediction, std::abs(y_model[k] - o.result.y_fitted_um[0][k]));
+    // The fitted prediction also carries the sensor offset.
+    if (s.t_s[k] > 10.0)
+      worst_prediction = std::max(worst_prediction, std::abs(y_model[k] + offset_um - o.result.y_fitted_um[0][k]));
     rig.apply(s.u_V[k]);
   }
   EXPECT_LT(worst_rig, 1e-5) << "the sim rig must run the diagnosed model (parameters written with 8 digits)";

@@ -159,7 +159,7 @@ TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
     AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::dead_zone, {-3.0, 10.0}});
     FAIL() << "no error";
   } catch (const ConfigError& e) {
-    EXPECT_EQ(e.key(), "effect.threshold_V");
+    EXPECT_EQ(e.key(), "effect.dead_zone.threshold_V");
   }
 }
 
