@@ -253,7 +253,8 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
   s << "#\n# [model] is the nominal model the recordings were compared with (what the controller uses).\n"
     << "# [sim.truth] is that model with the nuisance refit (overall gain " << num(r.nominal_refit.gain, "%.4g")
-    << ", G's time constants x " << num(r.nominal_refit.time_scale, "%.4g") << ") plus the diagnosed effects\n"
+    << ", G's time constants x " << num(r.nominal_refit.time_scale, "%.4g") << ", f's nonlinear coefficients x "
+    << num(r.nominal_refit.poly_shape, "%.4g") << ") plus the diagnosed effects\n"
     << "# ([[sim.truth.effect]], dominant first), so\n"
     << "#   pvcgeld --config THIS_FILE   (sim backend)\n"
     << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n";
@@ -276,9 +277,10 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
     << "\nquantization_um = 0.0\n\n"
     << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effects replace them.\n"
     << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
-  std::vector<double> poly = m.f.coefficients();
+  const auto truth = refit_model(m, r.nominal_refit.time_scale, r.nominal_refit.poly_shape);
+  std::vector<double> poly = truth.f.coefficients();
   for (double& c : poly) c *= r.nominal_refit.gain;
-  const auto G = time_scaled(m.G, r.nominal_refit.time_scale);
+  const auto& G = truth.G;
   s << "[sim.truth]\npoly = " << toml_array(poly) << "\nG_num = " << toml_array(G.num()) << "\nG_den = " << toml_array(G.den())
     << "\n";
   if (r.mixture.empty()) s << "\n# No effect added (verdict: " << r.verdict << ").\n";
@@ -315,6 +317,7 @@ std::string extension_json(const DiagnosisResult& r) {
   j << "], \"note\": " << quoted(a.note) << "},\n";
   const auto& n = r.nominal_refit;
   j << "  \"nominal_refit\": {\"gain\": " << num(n.gain) << ", \"time_scale\": " << num(n.time_scale)
+    << ", \"poly_shape\": " << num(n.poly_shape)
     << ", \"rmse_um\": " << num(n.errors.rmse_um) << ", \"rmse_validation_um\": " << num(n.errors.rmse_validation_um) << "},\n";
   const auto& t = r.none_test;
   j << "  \"none_test\": {\"false_alarm_rate\": " << num(t.false_alarm_rate) << ", \"windows\": " << t.windows
@@ -400,7 +403,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     << num(r.alignment.used_samples, "%.3g") << " used; sensor offset " << num(r.alignment.offset_um.front(), "%.4g") << " um"
     << (r.alignment.note.empty() ? "" : "\n  NOTE: " + r.alignment.note) << "\n";
   s << "nominal refit (nuisance only): gain " << num(r.nominal_refit.gain, "%.4g") << ", G time scale "
-    << num(r.nominal_refit.time_scale, "%.4g") << ", held-out " << num(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+    << num(r.nominal_refit.time_scale, "%.4g") << ", f shape " << num(r.nominal_refit.poly_shape, "%.4g") << ", held-out " << num(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";

@@ -33,15 +33,23 @@ struct SquaredError {
   [[nodiscard]] double mse() const { return n > 0 ? sum / n : 0.0; }
 };
 
+/// The bounded refit of the nominal model that is fitted as a nonlinear nuisance:
+/// G's time constants scaled by time_scale, f's coefficients above the linear one by shape.
+struct Nominal {
+  Nominal(double ts = 1.0, double sh = 1.0) : time_scale(ts), shape(sh) {}  // NOLINT: a bare time scale converts
+  double time_scale, shape;
+  [[nodiscard]] bool identity() const { return time_scale == 1.0 && shape == 1.0; }
+};
+
 /// Internal (fit) coordinates of a joint fit: the effects' parameters, then
 /// (optionally) G's time scale; log for scale parameters, range-normalised otherwise.
 struct FitSpace {
   std::vector<EffectKind> kinds;
   std::vector<ParameterSpec> specs;
   std::vector<size_t> first;  ///< index of each kind's first parameter in specs
-  bool time_scale = false;    ///< the last spec is G's time scale
+  bool time_scale = false;    ///< the last two specs are the nominal refit (G's time scale, f's shape)
 
-  FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_time_scale, double tolerance,
+  FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
            const std::vector<Series>* data = nullptr);
   [[nodiscard]] double scale(size_t i) const { return (specs[i].upper - specs[i].lower) / 100.0; }
   [[nodiscard]] double to_z(size_t i, double p) const { return specs[i].log_scale ? std::log(p) : p / scale(i); }
@@ -50,7 +58,7 @@ struct FitSpace {
     return std::clamp(p, specs[i].lower, specs[i].upper);
   }
   [[nodiscard]] size_t end_of(size_t e) const {
-    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? 1 : 0);
+    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? 2 : 0);
   }
   [[nodiscard]] std::vector<Effect> effects(const Eigen::VectorXd& z) const {
     std::vector<Effect> out;
@@ -61,16 +69,20 @@ struct FitSpace {
     }
     return out;
   }
-  [[nodiscard]] double g_scale(const Eigen::VectorXd& z) const {
-    return time_scale ? to_p(specs.size() - 1, z(z.size() - 1)) : 1.0;
+  [[nodiscard]] Nominal g_scale(const Eigen::VectorXd& z) const {
+    if (!time_scale) return {};
+    return {to_p(specs.size() - 2, z(z.size() - 2)), to_p(specs.size() - 1, z(z.size() - 1))};
   }
   /// z of given effects (kinds in this order) and time scale.
-  [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, double k) const {
+  [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
     Eigen::VectorXd z(static_cast<Eigen::Index>(specs.size()));
     for (size_t n = 0; n < kinds.size(); ++n)
       for (size_t i = first[n]; i < end_of(n); ++i)
         z(static_cast<Eigen::Index>(i)) = to_z(i, std::clamp(e[n].p[i - first[n]], specs[i].lower, specs[i].upper));
-    if (time_scale) z(z.size() - 1) = to_z(specs.size() - 1, k);
+    if (time_scale) {
+      z(z.size() - 2) = to_z(specs.size() - 2, k.time_scale);
+      z(z.size() - 1) = to_z(specs.size() - 1, k.shape);
+    }
     return z;
   }
 };
@@ -97,16 +109,20 @@ void add_data_starts(EffectKind kind, std::vector<ParameterSpec>& specs, const s
   }
 }
 
-FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_time_scale, double tolerance,
+FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
                    const std::vector<Series>* data)
-    : kinds(std::move(k)), time_scale(with_time_scale) {
+    : kinds(std::move(k)), time_scale(with_nominal) {
   for (auto kind : kinds) {
     first.push_back(specs.size());
     auto sp = parameter_specs(kind, d);
     if (data) add_data_starts(kind, sp, *data);
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
-  if (time_scale) specs.push_back({"time_scale", 1.0 / (1.0 + tolerance), 1.0 + tolerance, true, {1.0}});
+  if (time_scale) {
+    const double t = o.time_scale_tolerance, f = o.poly_shape_tolerance;
+    specs.push_back({"time_scale", 1.0 / (1.0 + t), 1.0 + t, true, {1.0}});
+    specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
+  }
 }
 
 /// The rest voltage (steady state) whose output matches the first measured samples.
@@ -161,10 +177,9 @@ class Problem {
   [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
 
   /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
-  std::vector<std::vector<double>> raw(std::span<const Effect> e, double k, bool all) {
+  std::vector<std::vector<double>> raw(std::span<const Effect> e, Nominal k, bool all) {
     ++simulations_;
-    HammersteinModel mk = model_;
-    if (k != 1.0) mk.G = time_scaled(model_.G, k);
+    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape);
     std::vector<std::vector<double>> out;
     for (size_t r = 0; r < data_.size(); ++r) {
       const auto& s = data_[r];
@@ -178,14 +193,14 @@ class Problem {
   }
 
   /// Projects a raw simulation: gain (fitted or 1), offset and initial-state modes per recording.
-  Prediction project(std::vector<std::vector<double>> yhat, double k, bool fit_gain);
+  Prediction project(std::vector<std::vector<double>> yhat, double time_scale, bool fit_gain);
 
-  Prediction predict(std::span<const Effect> e, double k, bool fit_gain, bool all = true) {
-    return project(raw(e, k, all), k, fit_gain);
+  Prediction predict(std::span<const Effect> e, Nominal k, bool fit_gain, bool all = true) {
+    return project(raw(e, k, all), k.time_scale, fit_gain);
   }
 
   /// Fit-segment residual after the projection.
-  Eigen::VectorXd residual(std::span<const Effect> e, double k) {
+  Eigen::VectorXd residual(std::span<const Effect> e, Nominal k) {
     const auto p = predict(e, k, true, false);
     Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
     Eigen::Index j = 0;
@@ -450,6 +465,17 @@ std::vector<std::vector<double>> simulate(const HammersteinModel& model, const E
   return out;
 }
 
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape) {
+  HammersteinModel m = model;
+  if (time_scale != 1.0) m.G = time_scaled(model.G, time_scale);
+  if (poly_shape != 1.0) {
+    auto c = model.f.coefficients();
+    for (size_t i = 1; i < c.size(); ++i) c[i] *= poly_shape;
+    m.f = OddPolynomial(c);
+  }
+  return m;
+}
+
 TransferFunction time_scaled(const TransferFunction& G, double factor) {
   // G(factor s): the coefficient of s^i is multiplied by factor^i.
   const auto scale = [&](std::vector<double> c) {
@@ -542,7 +568,11 @@ NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vecto
 /// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
 DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal) {
   DataScale d;
-  d.sample_time_s = data.front().sample_time_s;
+  // The slowest rate bounds the mode frequency; the fastest the delay line (in samples).
+  d.sample_time_s = 0.0;
+  d.sample_time_min_s = INFINITY;
+  for (const auto& s : data)
+    d.sample_time_s = std::max(d.sample_time_s, s.sample_time_s), d.sample_time_min_s = std::min(d.sample_time_min_s, s.sample_time_s);
   d.duration_s = 0.0;
   d.u_min_V = INFINITY;
   d.u_max_V = -INFINITY;
@@ -557,7 +587,7 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
   return d;
 }
 
-double fit_mse(Problem& p, std::span<const Effect> e, double k) {
+double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {
   const auto r = p.residual(e, k);
   return r.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(r.size(), 1));
 }
@@ -666,21 +696,12 @@ void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma,
   }
 }
 
-/// Golden-section search of G's time scale (nominal model, gain fitted) within the tolerance.
-double refit_time_scale(Problem& p, double tolerance) {
-  double a = -std::log1p(tolerance), b = std::log1p(tolerance);
-  const double g = 0.5 * (std::sqrt(5.0) - 1.0);
-  double c = b - g * (b - a), d = a + g * (b - a);
-  double fc = fit_mse(p, {}, std::exp(c)), fd = fit_mse(p, {}, std::exp(d));
-  for (int i = 0; i < 14; ++i) {
-    if (fc < fd) {
-      b = d, d = c, fd = fc, c = b - g * (b - a), fc = fit_mse(p, {}, std::exp(c));
-    } else {
-      a = c, c = d, fc = fd, d = a + g * (b - a), fd = fit_mse(p, {}, std::exp(d));
-    }
-  }
-  const double k = std::exp(0.5 * (a + b));
-  return fit_mse(p, {}, k) <= fit_mse(p, {}, 1.0) ? k : 1.0;
+/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
+Nominal refit_nominal(Problem& p, const DataScale& scale, const DiagnosisOptions& o) {
+  FitSpace space({}, scale, true, o);
+  double cost = 0.0;
+  const auto z = levenberg_marquardt(p, space, space.z_of({}, Nominal{}), cost);
+  return space.g_scale(z);
 }
 
 /// Coarse grid (the evidence) for every candidate, then joint least squares
@@ -690,7 +711,7 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
                     const DiagnosisOptions& o, double nuisance_cost) {
   std::vector<std::vector<Eigen::VectorXd>> starts;
   for (EffectKind kind : kCandidateEffects) {
-    FitSpace space({kind}, scale, false, o.time_scale_tolerance, &data);
+    FitSpace space({kind}, scale, false, o, &data);
     std::vector<std::pair<double, Eigen::VectorXd>> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(space.specs.size()))}};
     for (size_t i = 0; i < space.specs.size(); ++i) {
       std::vector<std::pair<double, Eigen::VectorXd>> next;
@@ -719,23 +740,24 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank) {
     auto& c = res.candidates[order[rank]];
-    FitSpace space({c.effect.kind}, scale, true, o.time_scale_tolerance, &data);
+    FitSpace space({c.effect.kind}, scale, true, o, &data);
     double best = INFINITY;
     for (const auto& s0 : starts[order[rank]]) {
       Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
       z.head(s0.size()) = s0;
-      z(z.size() - 1) = 0.0;
+      z.tail(2) = space.z_of({space.effects(z).front()}, Nominal{}).tail(2);
       double cost = 0.0;
       z = levenberg_marquardt(problem, space, z, cost);
       if (cost < best) {
         best = cost;
         c.effect = space.effects(z).front();
-        c.time_scale = space.g_scale(z);
+        c.time_scale = space.g_scale(z).time_scale;
+        c.poly_shape = space.g_scale(z).shape;
       }
     }
     c.fitted = true;
     const std::vector<Effect> e{c.effect};
-    const auto pred = problem.predict(e, c.time_scale, true);
+    const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape), true);
     c.gain = pred.gain;
     c.errors = errors_of(data, pred.y, res.held_out);
     c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
@@ -759,7 +781,8 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
 /// A fitted mixture of two effects.
 struct PairFit {
   std::vector<Effect> effects;
-  double time_scale = 1.0, gain = 1.0;
+  Nominal nominal;
+  double gain = 1.0;
   ModelErrors errors;
   double score = INFINITY;
 };
@@ -780,13 +803,13 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
       continue;  // two time-scale effects cannot run together
     }
     ++tried;
-    FitSpace space({a.effect.kind, b.effect.kind}, scale, true, o.time_scale_tolerance, &data);
+    FitSpace space({a.effect.kind, b.effect.kind}, scale, true, o, &data);
     double cost = 0.0;
-    const auto z = levenberg_marquardt(problem, space, space.z_of(start, a.time_scale), cost);
+    const auto z = levenberg_marquardt(problem, space, space.z_of(start, Nominal(a.time_scale, a.poly_shape)), cost);
     PairFit p;
     p.effects = space.effects(z);
-    p.time_scale = space.g_scale(z);
-    const auto pred = problem.predict(p.effects, p.time_scale, true);
+    p.nominal = space.g_scale(z);
+    const auto pred = problem.predict(p.effects, p.nominal, true);
     p.gain = pred.gain;
     p.errors = errors_of(data, pred.y, res.held_out);
     p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
@@ -857,14 +880,14 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     if (pair_ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   }
   std::vector<Effect> chosen;
-  double k = 1.0;
+  Nominal k;
   if (pair_ok) {
     chosen = pair.effects;
-    k = pair.time_scale;
+    k = pair.nominal;
     res.fitted = pair.errors;
   } else if (single_ok) {
     chosen = {best.effect};
-    k = best.time_scale;
+    k = Nominal(best.time_scale, best.poly_shape);
     res.fitted = best.errors;
     res.contribution = {base - excess(best.errors)};
     // Equally good single explanations are an answer, not a coin toss.
@@ -898,7 +921,8 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.chosen = chosen.front().kind;
   res.verdict = std::string(to_string(res.chosen));
   res.y_fitted_um = problem.predict(chosen, k, true).y;
-  res.nominal_refit.time_scale = k;
+  res.nominal_refit.time_scale = k.time_scale;
+  res.nominal_refit.poly_shape = k.shape;
   std::string text = lead + "Best explanation: " + best.explanation;
   if (pair_ok)
     text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
@@ -937,9 +961,10 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   res.baseline = errors_of(data, base.y, res.held_out);
   res.alignment.offset_um = base.offset_um;
   // 2. Nuisance-only refit of the nominal model: gain and G's time scale within tolerance.
-  const double k = refit_time_scale(problem, o.time_scale_tolerance);
+  const DataScale scale = data_scale(data, base.y);
+  const Nominal k = refit_nominal(problem, scale, o);
   const auto refit = problem.predict({}, k, true);
-  res.nominal_refit = {refit.gain, k, errors_of(data, refit.y, res.held_out)};
+  res.nominal_refit = {refit.gain, k.time_scale, k.shape, errors_of(data, refit.y, res.held_out)};
   std::vector<double> sigmas;
   for (size_t r = 0; r < data.size(); ++r) {
     std::vector<double> e(data[r].y_um.size());
@@ -971,7 +996,6 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     return res;
   }
   // 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict.
-  const DataScale scale = data_scale(data, base.y);
   fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm());
   for (auto& c : res.candidates)
     c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +

@@ -28,6 +28,7 @@ struct DiagnosisOptions {
   int max_undeclared_delay_samples = 2;  ///< an undeclared I/O delay is searched over 0..this (hold conventions)
   double gain_tolerance = 0.25;       ///< nominal refit: overall gain within [1/(1+tol), 1+tol]
   double time_scale_tolerance = 0.25; ///< nominal refit: G's time constants scaled within [1/(1+tol), 1+tol]
+  double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
@@ -67,7 +68,7 @@ struct CandidateResult {
   bool fitted = false;       ///< refined by least squares (the leading candidates only)
   ModelErrors errors;
   double score = 0.0;        ///< penalised validation MSE (lower is better)
-  double time_scale = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
+  double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
   int simulations = 0;
   std::string explanation;
 };
@@ -82,9 +83,9 @@ struct Alignment {
   std::string note;                     ///< a plain sentence when estimate and file disagree
 };
 
-/// The nuisance-only refit of the nominal model: overall gain and G's time scale within tolerance.
+/// The nuisance-only refit of the nominal model: overall gain, G's time scale and f's shape within tolerance.
 struct NominalRefit {
-  double gain = 1.0, time_scale = 1.0;
+  double gain = 1.0, time_scale = 1.0, poly_shape = 1.0;
   ModelErrors errors;
 };
 
@@ -142,6 +143,10 @@ void check_series(const Series& s, const HammersteinModel& model);
 /// recording that starts at rest this is u[0]). No nuisance fit: the raw model.
 std::vector<std::vector<double>> simulate(const HammersteinModel& model, const Effect& effect,
                                           const std::vector<Series>& data, int io_delay_samples);
+
+/// The model with G's time constants multiplied by `time_scale` and f's
+/// coefficients above the linear one by `poly_shape` (the bounded nominal refit).
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape);
 
 /// G with every time constant multiplied by `factor` (G(factor s)): same DC gain.
 TransferFunction time_scaled(const TransferFunction& G, double factor);

@@ -100,7 +100,8 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
               {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(y_abs, {1.5, 5.0, 20.0})}};
     case EffectKind::delay: {
       const double n_max = static_cast<double>(kDelayLineSamples - 20);
-      return {{"extra_delay_s", 0.0, n_max * Ts, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
+      const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
+      return {{"extra_delay_s", 0.0, n_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
     }
     case EffectKind::asymmetric_dynamics:
       return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}}};

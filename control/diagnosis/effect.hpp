@@ -61,7 +61,8 @@ struct ParameterSpec {
 /// with it, so the same candidates work from millivolt amplifier inputs to a
 /// kilovolt, nanometre to millimetre strokes and 100 Hz to 10 kHz sampling.
 struct DataScale {
-  double sample_time_s = 1e-3;
+  double sample_time_s = 1e-3;      ///< the longest sample time of the recordings
+  double sample_time_min_s = 0.0;   ///< the shortest (0: the same); the delay line's length counts these
   double duration_s = 30.0;   ///< the longest recording
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
   double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
@@ -69,8 +70,12 @@ struct DataScale {
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
   /// The largest and smallest scales: a file's parameters (nothing recorded to
   /// scale by) are checked against the union of their bounds, physical limits only.
-  static DataScale unbounded(double sample_time_s) noexcept { return {sample_time_s, 1e300, -1e12, 1e12, 1e12}; }
-  static DataScale tiny(double sample_time_s) noexcept { return {sample_time_s, 0.0, -1e-12, 1e-12, 1e-12}; }
+  static DataScale unbounded(double sample_time_s) noexcept {
+    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12};
+  }
+  static DataScale tiny(double sample_time_s) noexcept {
+    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12};
+  }
 };
 
 /// Length of the plant's delay line (io delay plus the delay effect, in samples).

@@ -91,11 +91,10 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   control::SimulatedRig rig(sim);
   const auto& s = c.recordings[0];
   // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effect.
-  auto truth = control::paper_model(3);
+  auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape);
   auto poly = truth.f.coefficients();
   for (double& c : poly) c *= o.result.nominal_refit.gain;
   truth.f = control::OddPolynomial(poly);
-  truth.G = time_scaled(truth.G, o.result.nominal_refit.time_scale);
   ASSERT_EQ(cfg.rig.sim.io_delay_samples, std::lround(o.result.alignment.used_samples));
   AugmentedPlant plant(truth, cfg.rig.sim.io_delay_samples, s.sample_time_s, o.result.effect);
   const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
