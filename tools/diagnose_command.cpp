@@ -316,6 +316,8 @@ std::string extension_json(const DiagnosisResult& r) {
   for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << num(a.initial_V[i]);
   j << "], \"note\": " << quoted(a.note) << "},\n";
   const auto& n = r.nominal_refit;
+  j << "  \"baseline_aligned\": {\"rmse_um\": " << num(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << num(r.aligned.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << num(r.aligned.rmse_validation_um) << "},\n";
   j << "  \"nominal_refit\": {\"gain\": " << num(n.gain) << ", \"time_scale\": " << num(n.time_scale)
     << ", \"poly_shape\": " << num(n.poly_shape)
     << ", \"rmse_um\": " << num(n.errors.rmse_um) << ", \"rmse_validation_um\": " << num(n.errors.rmse_validation_um) << "},\n";

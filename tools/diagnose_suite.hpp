@@ -50,6 +50,7 @@ struct DirectorySuiteResult {
   int mixture_cases = 0, mixture_both_named = 0, mixture_dominant_correct = 0;
   int failed = 0;                                ///< cases the tool stopped on with an error
   std::vector<double> ratios;                    ///< held-out RMSE fitted / nominal on correct effect cases
+  std::vector<double> ratios_aligned;            ///< the same against the nominal with offset and start state fitted
   double max_case_s = 0.0, mean_case_s = 0.0;
   int cases = 0;
 };

@@ -630,7 +630,9 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
     // Sub-sample only when the minimum is clearly curved (not flat within the noise of the MSE).
     if (curv > 1e-3 * m1) a.io_delay_samples = best + std::clamp(0.5 * (m0 - m2) / curv, -0.5, 0.5);
   }
-  a.used_samples = o.io_delay_declared ? o.io_delay_samples : a.io_delay_samples;
+  // The analysis runs with whole samples (what a model file and the daemon can hold); the sub-sample
+  // estimate is reported, and a remainder of half a sample or more rounds up.
+  a.used_samples = o.io_delay_declared ? o.io_delay_samples : std::round(a.io_delay_samples);
   if (a.declared && std::abs(a.io_delay_samples - *a.declared) >= 0.5) {
     a.note = "the model file declares io_delay_samples = " + std::to_string(*a.declared) + ", but the data fit best with " +
              fmt("%.2g", a.io_delay_samples) + " samples";
@@ -643,7 +645,7 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
     }
   } else if (!a.declared) {
     a.note = "the model file does not declare io_delay_samples: estimated " + fmt("%.2g", a.io_delay_samples) +
-             " samples from the data (searched 0.." + std::to_string(max_d) + ") and used";
+             " samples from the data (searched 0.." + std::to_string(max_d) + "); " + fmt("%.0f", a.used_samples) + " used";
   }
   p.set_delay(a.used_samples);
   a.initial_V = p.initial();
@@ -920,9 +922,13 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.effect = chosen.front();
   res.chosen = chosen.front().kind;
   res.verdict = std::string(to_string(res.chosen));
-  res.y_fitted_um = problem.predict(chosen, k, true).y;
+  // The nominal refit and the offset, as fitted jointly with the verdict's effects (what the augmented model runs).
+  const auto pc = problem.predict(chosen, k, true);
+  res.y_fitted_um = pc.y;
+  res.nominal_refit.gain = pc.gain;
   res.nominal_refit.time_scale = k.time_scale;
   res.nominal_refit.poly_shape = k.shape;
+  res.alignment.offset_um = pc.offset_um;
   std::string text = lead + "Best explanation: " + best.explanation;
   if (pair_ok)
     text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
@@ -956,9 +962,12 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   Problem problem(model, data, res.held_out, o.gain_tolerance);
   // 1. Alignment (nuisance): start state, I/O delay, offset; the nominal model with it is the baseline.
   res.alignment = estimate_alignment(problem, data, o);
+  // The baseline is the model as the file states it (with the estimated delay when the file is silent);
+  // `aligned` adds the sensor offset and start state, which are not the model's fault.
   const auto base = problem.predict({}, 1.0, false);
-  res.y_baseline_um = base.y;
-  res.baseline = errors_of(data, base.y, res.held_out);
+  res.y_baseline_um = problem.raw({}, 1.0, true);
+  res.baseline = errors_of(data, res.y_baseline_um, res.held_out);
+  res.aligned = errors_of(data, base.y, res.held_out);
   res.alignment.offset_um = base.offset_um;
   // 2. Nuisance-only refit of the nominal model: gain and G's time scale within tolerance.
   const DataScale scale = data_scale(data, base.y);

@@ -83,7 +83,9 @@ struct Alignment {
   std::string note;                     ///< a plain sentence when estimate and file disagree
 };
 
-/// The nuisance-only refit of the nominal model: overall gain, G's time scale and f's shape within tolerance.
+/// The bounded refit of the nominal model: overall gain, G's time scale and f's shape within
+/// tolerance. With a verdict naming effects, the parameters are those fitted jointly with them
+/// (what the augmented model runs); `errors` are always those of the nuisance-only refit.
 struct NominalRefit {
   double gain = 1.0, time_scale = 1.0, poly_shape = 1.0;
   ModelErrors errors;
@@ -113,7 +115,8 @@ struct DiagnosisResult {
   NoneTest none_test;
   std::string explanation;
   double noise_sigma_um = 0.0;
-  ModelErrors baseline, fitted;  ///< fitted == baseline unless an effect was chosen
+  ModelErrors baseline, fitted;  ///< baseline: the nominal model as declared (estimated delay if silent); fitted: the verdict's
+  ModelErrors aligned;           ///< the nominal model with the sensor offset and start state fitted
   std::vector<CandidateResult> candidates;  ///< ranked best first (fitted ones by score, then the rest by evidence)
   std::vector<MismatchWindow> mismatch;
   std::vector<std::vector<double>> y_baseline_um, y_fitted_um;  ///< per recording

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "control/config_parser.hpp"
@@ -172,10 +173,47 @@ TEST(DiagnoseCommand, BadInputNamesFileLineAndReason) {
             "model.toml:4: model.G_den: G(s) = (1) / (s - 2) is unstable (a pole in the closed right half plane): an "
             "output-error simulation of it diverges");
   EXPECT_EQ(error_of("[model]\npoly = [0.1, -0.001]\nG_num = [1.0]\nG_den = [1.0, 2.0]\n", uniform_recording(10000)),
-            "model.toml:2: model.poly: f is not monotone: f'(x) reaches 0 at x = 5.8 V, inside the recorded voltage range "
-            "(|u| up to 100.0 V)");
+            "model.toml:2: model.poly: f is not monotone: f'(x) reaches 0 at x = 5.774 V, inside the recorded voltage range "
+            "(|u| up to 100 V)");
   EXPECT_EQ(error_of("[model]\npoly = [0.1]\nG_num = [1.0]\n", uniform_recording(10000)),
             "model.toml: model.G_den: is required (in model.toml)");
+}
+
+TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsTablesKept) {
+  // Issue 11's crash: a static gain with a fast first-order G (no PID reaches the default phase
+  // margin), the user's [controller] table present, bipolar drive. Diagnosing needs no controller.
+  const auto dir = temp_dir("piezo");
+  const std::string model =
+      "[model]\npoly = [0.05]\nG_num = [2000.0]\nG_den = [1.0, 2000.0]\n\n[controller]\nmode = \"pid\"\nperiod_s = 0.001\n";
+  write(dir / "model.toml", model);
+  Series s;
+  s.sample_time_s = 1e-3;
+  control::HammersteinModel truth{control::OddPolynomial({0.05}), control::TransferFunction({2000.0}, {1.0, 2000.0})};
+  AugmentedPlant plant(truth, 1.0, s.sample_time_s, Effect{EffectKind::hysteresis, {0.15, 60.0}});
+  for (int k = 0; k < 20000; ++k) {
+    s.t_s.push_back(k * 1e-3);
+    s.u_V.push_back(150.0 * std::sin(2.0 * M_PI * 1.0 * k * 1e-3) + 40.0 * std::sin(2.0 * M_PI * 3.3 * k * 1e-3));
+  }
+  s.y_um = plant.simulate(s.u_V, 0.0);
+  std::mt19937_64 rng(4);
+  std::normal_distribution<double> noise(0.0, 0.02);
+  for (double& y : s.y_um) y += noise(rng);
+  write_recording(dir / "rec.csv", s);
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.json = (dir / "report.json").string();
+  a.quiet = true;
+  const auto o = run_diagnose(a);
+  EXPECT_EQ(o.result.verdict, "hysteresis") << o.summary;
+  const auto json = read(a.json);
+  for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
+                          "\"declared\": null", "\"offset_um\": "})
+    EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
+  // The augmented model keeps the user's [controller] table and the sim backend accepts it.
+  const auto text = read(o.augmented_model_path);
+  EXPECT_NE(text.find("mode = 'pid'"), std::string::npos) << text;
+  EXPECT_NO_THROW((void)control::parse_simulated_rig(toml::parse_file(o.augmented_model_path), o.augmented_model_path));
 }
 
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
