@@ -228,5 +228,20 @@ TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   EXPECT_EQ(r.out_of_spec, 0);
 }
 
+TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
+  // The first 12 cases of tests/data/independent (made by a separate Python generator,
+  // tests/data/independent/generate.py, from physical descriptions only; labels in labels.csv).
+  // The issue's targets (>= 95% single effects, <= 2% false alarms, >= 80% mixtures named) are NOT
+  // met yet: this asserts today's level so it cannot silently get worse; the report prints the targets.
+  std::ostringstream log;
+  const auto r = run_directory_suite(std::string(PVCGEL_SOURCE_DIR) + "/tests/data/independent", 2, log, 12);
+  std::cout << log.str() << format_directory_suite(r);
+  EXPECT_EQ(r.cases, 12);
+  EXPECT_EQ(r.failed, 0);
+  EXPECT_EQ(r.false_alarms, 0);
+  EXPECT_GE(r.single_correct, 5);
+  for (double ratio : r.ratios) EXPECT_LE(ratio, 0.5);
+}
+
 }  // namespace
 }  // namespace pvcgel::tools
