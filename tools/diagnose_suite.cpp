@@ -283,7 +283,7 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
   matrix.confusion = r.confusion;
   std::string s = format_suite(matrix);
   s = s.substr(0, s.find("accuracy"));  // the matrix only; the scores follow with the issue 11 targets
-  char b[512];
+  char b[2048];
   const auto pct = [](int a, int n) { return n ? 100.0 * a / n : NAN; };
   const double acc = pct(r.single_correct, r.single_cases), fa = pct(r.false_alarms, r.none_cases),
                both = pct(r.mixture_both_named, r.mixture_cases);
