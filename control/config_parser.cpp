@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "control/config_error.hpp"
+#include "control/diagnosis/effect_config.hpp"
 #include "control/toml_reader.hpp"
 
 namespace pvcgel::control {
@@ -15,24 +16,34 @@ HammersteinModel read_model(TableReader& t) {
   return {std::move(f), std::move(G)};
 }
 
-/// `[sim.truth.effect]`: the effect `pvcgel diagnose` writes (name plus its parameters).
-diagnosis::Effect read_effect(TableReader& t, double sample_time_s) {
-  const std::string name = t.string("name", "");
-  const auto kind = diagnosis::parse_effect_kind(name);
-  if (!kind || *kind == diagnosis::EffectKind::none) {
-    std::string known;
-    for (auto k : diagnosis::kCandidateEffects) known += (known.empty() ? "" : ", ") + std::string(diagnosis::to_string(k));
-    throw ConfigError(t.key("name"), "unknown effect '" + name + "' (" + known + ")");
+/// `[sim]`: the simulated truth (sampled at the controller's period).
+SimRigConfig read_sim(TableReader& s, double sample_time_s) {
+  SimRigConfig sc;
+  sc.sample_time_s = sample_time_s;
+  const int seed = s.integer("seed", static_cast<int>(sc.seed));
+  if (seed < 0) throw ConfigError(s.key("seed"), "must be >= 0");
+  sc.seed = static_cast<std::uint64_t>(seed);
+  sc.io_delay_samples = s.integer("io_delay_samples", sc.io_delay_samples);
+  sc.noise_sigma_um = s.number("noise_sigma_um", sc.noise_sigma_um);
+  sc.quantization_um = s.number("quantization_um", sc.quantization_um);
+  auto truth = s.table("truth");
+  if (truth.present()) {
+    sc.truth = read_model(truth);
+    sc.added_effects = diagnosis::read_effect_tables(truth, "effect", sc.sample_time_s);
+    truth.finish();
   }
-  diagnosis::Effect e{*kind, {}};
-  const auto specs = diagnosis::parameter_specs(*kind, sample_time_s, 1e300);
-  for (size_t i = 0; i < specs.size(); ++i) {
-    if (!t.has(specs[i].name)) throw ConfigError(t.key(specs[i].name), "is required for a " + name + " effect");
-    e.p[i] = t.number(specs[i].name, 0.0);
-  }
-  t.finish();
-  diagnosis::validate(e, sample_time_s, t.key("").substr(0, t.key("").size() - 1));
-  return e;
+  auto h = s.table("hysteresis");
+  sc.hysteresis.enabled = h.boolean("enabled", sc.hysteresis.enabled);
+  sc.hysteresis.alpha = h.number("alpha", sc.hysteresis.alpha);
+  sc.hysteresis.saturation_V = h.number("saturation_V", sc.hysteresis.saturation_V);
+  h.finish();
+  auto cr = s.table("creep");
+  sc.creep.enabled = cr.boolean("enabled", sc.creep.enabled);
+  sc.creep.fraction = cr.number("fraction", sc.creep.fraction);
+  sc.creep.time_constant_s = cr.number("time_constant_s", sc.creep.time_constant_s);
+  cr.finish();
+  s.finish();
+  return sc;
 }
 
 }  // namespace
@@ -46,6 +57,18 @@ HammersteinModel parse_model(const toml::table& root, const std::string& source)
     m = read_model(model);
   });
   return m;
+}
+
+SimRigConfig parse_simulated_rig(const toml::table& root, const std::string& source) {
+  SimRigConfig sc;
+  with_source(source, [&] {
+    TableReader top(&root, "");
+    auto c = top.table("controller");
+    auto s = top.table("sim");
+    sc = read_sim(s, c.number("period_s", ControllerConfig{}.sample_time_s));
+    SimulatedRig rig_check(sc);
+  });
+  return sc;
 }
 
 RigConfiguration parse_configuration(const toml::table& root, const std::string& source,
@@ -110,37 +133,12 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     c.finish();
 
     auto s = top.table("sim");
-    auto& sc = cfg.sim;
-    sc.sample_time_s = cc.sample_time_s;
-    const int seed = s.integer("seed", static_cast<int>(sc.seed));
-    if (seed < 0) throw ConfigError(s.key("seed"), "must be >= 0");
-    sc.seed = static_cast<std::uint64_t>(seed);
-    sc.io_delay_samples = s.integer("io_delay_samples", sc.io_delay_samples);
-    sc.noise_sigma_um = s.number("noise_sigma_um", sc.noise_sigma_um);
-    sc.quantization_um = s.number("quantization_um", sc.quantization_um);
-    auto truth = s.table("truth");
-    if (truth.present()) {
-      sc.truth = read_model(truth);
-      auto effect = truth.table("effect");
-      if (effect.present()) sc.added_effect = read_effect(effect, sc.sample_time_s);
-      truth.finish();
-    }
-    auto h = s.table("hysteresis");
-    sc.hysteresis.enabled = h.boolean("enabled", sc.hysteresis.enabled);
-    sc.hysteresis.alpha = h.number("alpha", sc.hysteresis.alpha);
-    sc.hysteresis.saturation_V = h.number("saturation_V", sc.hysteresis.saturation_V);
-    h.finish();
-    auto cr = s.table("creep");
-    sc.creep.enabled = cr.boolean("enabled", sc.creep.enabled);
-    sc.creep.fraction = cr.number("fraction", sc.creep.fraction);
-    sc.creep.time_constant_s = cr.number("time_constant_s", sc.creep.time_constant_s);
-    cr.finish();
-    s.finish();
+    cfg.sim = read_sim(s, cc.sample_time_s);
     top.finish();
 
     // Build once so every design-time check runs now, not when a loop starts.
     Controller check(cfg.model, cc);
-    SimulatedRig rig_check(sc);
+    SimulatedRig rig_check(cfg.sim);
   });
   return cfg;
 }

@@ -26,6 +26,11 @@ struct RigConfiguration {
 RigConfiguration parse_configuration(const toml::table& root, const std::string& source,
                                      const std::vector<std::string>& other_tables = {});
 
+/// Reads only `[sim]` (and `[controller] period_s`, its sample time) and builds
+/// the simulated rig once: what the sim backend needs, without designing a
+/// controller (a diagnosed model need not have a tunable one). Other tables are ignored.
+SimRigConfig parse_simulated_rig(const toml::table& root, const std::string& source);
+
 /// Reads only a `[model]` table (identification output, or a full config).
 HammersteinModel parse_model(const toml::table& root, const std::string& source);
 

@@ -21,11 +21,11 @@ SimulatedRig::SimulatedRig(const SimRigConfig& c) : cfg_(c), rng_(c.seed) {
   const TransferFunction creep({c.creep.fraction * c.truth.G.dc_gain()}, {c.creep.time_constant_s, 1.0});
   creep_ = LtiFilter(discretize_zoh(realize(creep), c.sample_time_s));
   if (const auto turn = c.truth.f.first_turnover(1000.0)) x_sat_ = *turn;
-  if (c.added_effect.kind != diagnosis::EffectKind::none) {
+  if (!c.added_effects.empty()) {
     if (c.hysteresis.enabled || c.creep.enabled)
       throw ConfigError("sim.truth.effect", "a diagnosed effect replaces the rig's built-in effects: set [sim.hysteresis] "
                                             "and [sim.creep] enabled = false");
-    augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, c.added_effect);
+    augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, std::span<const diagnosis::Effect>(c.added_effects));
   }
   reset_steady_state(0.0);
 }

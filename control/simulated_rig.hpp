@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <optional>
 #include <random>
+#include <vector>
 
 #include "control/diagnosis/effect.hpp"
 #include "control/hammerstein_model.hpp"
@@ -44,10 +45,11 @@ struct SimRigConfig {
     double time_constant_s = 20.0;
   } creep;
 
-  /// An effect diagnosed by `pvcgel diagnose` (`[sim.truth.effect]`): the
-  /// truth then runs as diagnosis::AugmentedPlant (model plus this effect)
-  /// and the built-in hysteresis and creep must be off.
-  diagnosis::Effect added_effect{};
+  /// Effects diagnosed by `pvcgel diagnose` (`[[sim.truth.effect]]`, dominant
+  /// first, at most diagnosis::kMaxEffects): the truth then runs as
+  /// diagnosis::AugmentedPlant (model plus these effects) and the built-in
+  /// hysteresis and creep must be off.
+  std::vector<diagnosis::Effect> added_effects{};
 
   /// This rig with `truth` as its plant and every effect beyond the Hammerstein
   /// model switched off (no hysteresis, creep, noise or quantisation; the I/O
@@ -56,7 +58,7 @@ struct SimRigConfig {
     SimRigConfig c = *this;
     c.truth = model;
     c.hysteresis.enabled = c.creep.enabled = false;
-    c.added_effect = {};
+    c.added_effects.clear();
     c.noise_sigma_um = c.quantization_um = 0.0;
     return c;
   }

@@ -78,6 +78,12 @@ class TableReader {
     return {sub, key(k)};
   }
   [[nodiscard]] bool present() const { return t_ != nullptr; }
+  /// The raw node under k (nullptr when absent), marked as used: for shapes
+  /// the typed getters do not cover (arrays of tables).
+  const toml::node* node(const std::string& k) {
+    used_.insert(k);
+    return has(k) ? t_->get(k) : nullptr;
+  }
   /// Mark a key as handled elsewhere (not reported as unknown).
   void skip(const std::string& k) { used_.insert(k); }
   void finish() const {

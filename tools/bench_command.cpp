@@ -167,13 +167,25 @@ void add_diagnose_bench(CLI::App& bench) {
     int cases = 44;
     std::uint64_t seed = 7;
     std::string save;
+    std::string suite;
+    int jobs = 1;
+    int limit = 0;
   };
   auto args = std::make_shared<Args>();
   auto* cmd = bench.add_subcommand("diagnose", "Blind suite for pvcgel diagnose: concealed effects, confusion matrix, accuracy");
   cmd->add_option("--cases", args->cases, "number of cases (every effect and none, evenly)")->capture_default_str()->check(CLI::Range(11, 10000));
   cmd->add_option("--seed", args->seed, "suite seed")->capture_default_str();
   cmd->add_option("--save", args->save, "also write the cases as recordings to DIR (labels apart, in labels.csv)");
+  cmd->add_option("--suite", args->suite,
+                  "score a suite made elsewhere instead: DIR with caseNNN/{model.toml,rec*.csv} and labels.csv "
+                  "(case,effects,dominant,...; effects none, a name or a+b)")->check(CLI::ExistingDirectory);
+  cmd->add_option("--jobs", args->jobs, "cases diagnosed in parallel (--suite)")->capture_default_str()->check(CLI::Range(1, 64));
+  cmd->add_option("--limit", args->limit, "only the first N cases of --suite (0: all)")->capture_default_str();
   cmd->callback([args] {
+    if (!args->suite.empty()) {
+      std::cout << format_directory_suite(run_directory_suite(args->suite, args->jobs, std::cout, args->limit));
+      return;
+    }
     const auto r = run_blind_suite(args->cases, args->seed, std::cout, {}, args->save);
     std::cout << format_suite(r);
   });

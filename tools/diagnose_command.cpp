@@ -218,6 +218,15 @@ LoadedModel load_model(const std::string& path) {
       throw std::runtime_error(where(path, line_of(root, "model", "io_delay_samples")) +
                                ": model.io_delay_samples: must be an integer 0..8");
     m.io_delay_samples = static_cast<int>(*v);
+    m.io_delay_declared = true;
+  }
+  toml::table others;
+  for (const auto& [k, v] : root)
+    if (k.str() != "model" && k.str() != "sim") others.insert(k, v);
+  if (!others.empty()) {
+    std::ostringstream o;
+    o << others;
+    m.other_tables = o.str();
   }
   if (!m.model.G.is_stable())
     throw std::runtime_error(where(path, line_of(root, "model", "G_den")) + ": model.G_den: G(s) = " +
@@ -241,33 +250,83 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   std::ostringstream s;
   std::istringstream in(comment);
   for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
+  const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
   s << "#\n# [model] is the nominal model the recordings were compared with (what the controller uses).\n"
-    << "# [sim.truth] is that model plus the diagnosed effect ([sim.truth.effect]), so\n"
+    << "# [sim.truth] is that model with the nuisance refit (overall gain " << num(r.nominal_refit.gain, "%.4g")
+    << ", G's time constants x " << num(r.nominal_refit.time_scale, "%.4g") << ", f's nonlinear coefficients x "
+    << num(r.nominal_refit.poly_shape, "%.4g") << ") plus the diagnosed effects\n"
+    << "# ([[sim.truth.effect]], dominant first), so\n"
     << "#   pvcgeld --config THIS_FILE   (sim backend)\n"
-    << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n\n";
+    << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n";
+  if (!lm.io_delay_declared)
+    s << "# io_delay_samples: not declared in the model file; estimated " << num(r.alignment.io_delay_samples, "%.3g")
+      << " samples from the data (rounded here).\n";
+  if (!lm.other_tables.empty()) s << "# The model file's other tables follow [model] unchanged.\n";
+  s << "\n";
   const std::string model_keys = "poly = " + toml_array(m.f.coefficients()) + "\nG_num = " + toml_array(m.G.num()) +
                                  "\nG_den = " + toml_array(m.G.den()) + "\n";
-  s << "[model]\n" << model_keys << "io_delay_samples = " << lm.io_delay_samples << "\n\n";
-  if (const auto turn = m.f.first_turnover(1000.0)) {
+  s << "[model]\n" << model_keys << "io_delay_samples = " << io << "\n\n";
+  if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
+  const auto turn = m.f.first_turnover(1000.0);
+  if (turn && lm.other_tables.find("[controller]") == std::string::npos) {
     // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
     s << "# f turns over at " << num(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
       << num(std::floor(0.99 * *turn), "%.0f") << "\n\n";
   }
-  s << "[sim]\nio_delay_samples = " << lm.io_delay_samples << "\nnoise_sigma_um = " << num(r.noise_sigma_um, "%.4g")
+  s << "[sim]\nio_delay_samples = " << io << "\nnoise_sigma_um = " << num(r.noise_sigma_um, "%.4g")
     << "\nquantization_um = 0.0\n\n"
-    << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effect replaces them.\n"
+    << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effects replace them.\n"
     << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
-  s << "[sim.truth]\n" << model_keys;
-  if (r.chosen != EffectKind::none) {
-    const auto specs = parameter_specs(r.chosen, 1e-3, 1e300);
-    s << "\n# The diagnosed effect: " << physical_meaning(r.chosen) << ".\n"
-      << "# Form (control/diagnosis/effect.hpp, AugmentedPlant): see `pvcgel diagnose --help`; parameters:\n";
-    s << "[sim.truth.effect]\nname = " << quoted(std::string(to_string(r.chosen))) << "\n";
-    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << num(r.effect.p[i], "%.8g") << "\n";
-  } else {
-    s << "\n# No effect added (verdict: " << r.verdict << ").\n";
+  const auto truth = refit_model(m, r.nominal_refit.time_scale, r.nominal_refit.poly_shape);
+  std::vector<double> poly = truth.f.coefficients();
+  for (double& c : poly) c *= r.nominal_refit.gain;
+  const auto& G = truth.G;
+  s << "[sim.truth]\npoly = " << toml_array(poly) << "\nG_num = " << toml_array(G.num()) << "\nG_den = " << toml_array(G.den())
+    << "\n";
+  if (r.mixture.empty()) s << "\n# No effect added (verdict: " << r.verdict << ").\n";
+  for (const auto& e : r.mixture) {
+    const auto specs = parameter_specs(e.kind, DataScale::unbounded(1e-3));
+    s << "\n# " << physical_meaning(e.kind) << ".\n[[sim.truth.effect]]\nname = " << quoted(std::string(to_string(e.kind))) << "\n";
+    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << num(e.p[i], "%.8g") << "\n";
   }
   return s.str();
+}
+
+/// The keys of issue 11: mixture, ambiguity, alignment, the nuisance refit and the none test.
+std::string extension_json(const DiagnosisResult& r) {
+  std::ostringstream j;
+  j << "  \"mixture\": [";
+  for (size_t i = 0; i < r.mixture.size(); ++i) {
+    CandidateResult c;
+    c.effect = r.mixture[i];
+    c.specs = parameter_specs(c.effect.kind, DataScale::unbounded(1e-3));
+    j << (i ? ", " : "") << "{\"name\": " << quoted(std::string(to_string(c.effect.kind))) << ", \"params\": " << effect_params_json(c)
+      << ", \"heldout_mse_removed_um2\": " << num(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";
+  }
+  j << "],\n  \"ambiguous_with\": [";
+  for (size_t i = 0; i < r.ambiguous_with.size(); ++i) j << (i ? ", " : "") << quoted(r.ambiguous_with[i]);
+  j << "],\n";
+  if (!r.ambiguous_with.empty()) j << "  \"separating_experiment\": " << quoted(r.separating_experiment) << ",\n";
+  const auto& a = r.alignment;
+  j << "  \"alignment\": {\"io_delay_samples\": " << num(a.io_delay_samples, "%.3g") << ", \"declared\": "
+    << (a.declared ? std::to_string(*a.declared) : "null") << ", \"used_samples\": " << num(a.used_samples, "%.3g")
+    << ", \"offset_um\": " << num(a.offset_um.empty() ? NAN : a.offset_um.front()) << ", \"offset_per_recording_um\": [";
+  for (size_t i = 0; i < a.offset_um.size(); ++i) j << (i ? ", " : "") << num(a.offset_um[i]);
+  j << "], \"initial_V\": [";
+  for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << num(a.initial_V[i]);
+  j << "], \"note\": " << quoted(a.note) << "},\n";
+  const auto& n = r.nominal_refit;
+  j << "  \"baseline_aligned\": {\"rmse_um\": " << num(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << num(r.aligned.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << num(r.aligned.rmse_validation_um) << "},\n";
+  j << "  \"nominal_refit\": {\"gain\": " << num(n.gain) << ", \"time_scale\": " << num(n.time_scale)
+    << ", \"poly_shape\": " << num(n.poly_shape)
+    << ", \"rmse_um\": " << num(n.errors.rmse_um) << ", \"rmse_validation_um\": " << num(n.errors.rmse_validation_um) << "},\n";
+  const auto& t = r.none_test;
+  j << "  \"none_test\": {\"false_alarm_rate\": " << num(t.false_alarm_rate) << ", \"windows\": " << t.windows
+    << ", \"worst_window_ratio\": " << num(t.worst_window_ratio) << ", \"window_threshold\": " << num(t.window_threshold)
+    << ", \"ljung_box_q\": " << num(t.whiteness_q) << ", \"ljung_box_threshold\": " << num(t.whiteness_threshold)
+    << ", \"level_ok\": " << (t.level_ok ? "true" : "false") << ", \"white\": " << (t.white ? "true" : "false") << "}";
+  return j.str();
 }
 
 std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::string>& recordings,
@@ -296,7 +355,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
     j << (i ? ",\n" : "\n") << "    {\"recording\": " << w.recording << ", \"t_start_s\": " << num(w.t_start_s)
       << ", \"t_end_s\": " << num(w.t_end_s) << ", \"regime\": " << quoted(w.regime) << ", \"rms_um\": " << num(w.rms_um) << "}";
   }
-  j << "\n  ],\n  \"recordings\": [";
+  j << "\n  ],\n" << extension_json(r) << ",\n  \"recordings\": [";
   for (size_t i = 0; i < recordings.size(); ++i)
     j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
       << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
@@ -326,6 +385,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   }
   DiagnosisOptions opt;
   opt.io_delay_samples = lm.io_delay_samples;
+  opt.io_delay_declared = lm.io_delay_declared;
   DiagnoseOutcome out;
   try {
     out.result = diagnose(lm.model, data, opt);
@@ -340,6 +400,18 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   std::ostringstream s;
   s << "verdict: " << r.verdict << "\n" << r.explanation << "\n";
   s << "noise (estimated): " << num(r.noise_sigma_um, "%.4f") << " um\n";
+  s << "alignment: I/O delay " << num(r.alignment.io_delay_samples, "%.3g") << " samples estimated, "
+    << (r.alignment.declared ? std::to_string(*r.alignment.declared) + " declared" : std::string("none declared")) << ", "
+    << num(r.alignment.used_samples, "%.3g") << " used; sensor offset " << num(r.alignment.offset_um.front(), "%.4g") << " um"
+    << (r.alignment.note.empty() ? "" : "\n  NOTE: " + r.alignment.note) << "\n";
+  s << "nominal refit (nuisance only): gain " << num(r.nominal_refit.gain, "%.4g") << ", G time scale "
+    << num(r.nominal_refit.time_scale, "%.4g") << ", f shape " << num(r.nominal_refit.poly_shape, "%.4g") << ", held-out " << num(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+  if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
+  if (!r.ambiguous_with.empty()) {
+    s << "ambiguous with:";
+    for (const auto& n : r.ambiguous_with) s << " " << n;
+    s << "\n  " << r.separating_experiment << "\n";
+  }
   s << "nominal model:   RMSE " << num(r.baseline.rmse_um, "%.4f") << " um, held-out " << num(r.baseline.rmse_validation_um, "%.4f") << " um\n";
   s << "augmented model: RMSE " << num(r.fitted.rmse_um, "%.4f") << " um, held-out " << num(r.fitted.rmse_validation_um, "%.4f") << " um\n";
   for (size_t i = 0; i < skipped.size(); ++i)
@@ -365,20 +437,21 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
       write_text(a.predict + std::to_string(i) + ".csv", p.str());
     }
   }
+  // The JSON and the report first: nothing after this can lose them.
   const std::string model_path = augmented_model_path(a);
+  if (!a.json.empty()) write_text(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
+  if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
   if (!model_path.empty()) {
     const std::string text = augmented_model_toml(lm, r, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
-    // The file must be what the daemon accepts: parse it back before writing.
+    // The file must be what the sim backend accepts (a controller is not needed to diagnose): parse it back first.
     try {
-      (void)control::parse_configuration(toml::parse(text), model_path);
+      (void)control::parse_simulated_rig(toml::parse(text), model_path);
     } catch (const std::exception& e) {
-      throw std::runtime_error(std::string("internal: the augmented model does not parse back: ") + e.what());
+      throw std::runtime_error("the augmented model " + model_path + " was not written (the JSON and report were): " + e.what());
     }
     write_text(model_path, text);
     out.augmented_model_path = model_path;
   }
-  if (!a.json.empty()) write_text(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
-  if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
   return out;
 }
 

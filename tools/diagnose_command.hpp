@@ -28,6 +28,8 @@ struct DiagnoseArgs {
 struct LoadedModel {
   control::HammersteinModel model = control::paper_model(2);  ///< replaced by the file's
   int io_delay_samples = 1;
+  bool io_delay_declared = false;  ///< the file has `[model] io_delay_samples` (else it is estimated)
+  std::string other_tables;        ///< the file's tables other than [model] and [sim], as TOML (kept in the augmented model)
 };
 
 /// Reads `[model]` (poly, G_num, G_den, optional io_delay_samples) from `path`.
@@ -41,8 +43,10 @@ LoadedModel load_model(const std::string& path);
 std::string augmented_model_path(const DiagnoseArgs& args);
 
 /// The augmented model file: `[model]` (the nominal model, what the controller
-/// uses) and a `[sim]` table whose `[sim.truth]` is the model plus the
-/// diagnosed effect in `[sim.truth.effect]`, so pvcgeld's sim backend runs it.
+/// uses), the user's other tables unchanged, and a `[sim]` table whose
+/// `[sim.truth]` is the model (with the nuisance refit: gain and G's time
+/// scale) plus the diagnosed effects in `[[sim.truth.effect]]`, dominant
+/// first, so pvcgeld's sim backend runs it.
 std::string augmented_model_toml(const LoadedModel& model, const control::diagnosis::DiagnosisResult& result,
                                  const std::string& comment);
 

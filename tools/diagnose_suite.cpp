@@ -1,11 +1,18 @@
 #include "tools/diagnose_suite.hpp"
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cmath>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
 
+#include "tools/diagnose_command.hpp"
 #include "tools/ident_command.hpp"
 
 namespace pvcgel::tools {
@@ -123,6 +130,182 @@ std::string format_suite(const BlindSuiteResult& r) {
   std::snprintf(b, sizeof b, "diagnosis time per case: mean %.2f s, max %.2f s (target <= 30 s)\n", r.mean_case_s, r.max_case_s);
   s += b;
   return s;
+}
+
+}  // namespace pvcgel::tools
+
+namespace pvcgel::tools {
+
+namespace {
+
+/// Splits one CSV line (double-quoted fields may hold commas and "" escapes).
+std::vector<std::string> csv_fields(const std::string& line) {
+  std::vector<std::string> out(1);
+  bool quoted = false;
+  for (size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted && c == '"' && i + 1 < line.size() && line[i + 1] == '"') out.back() += '"', ++i;
+    else if (c == '"') quoted = !quoted;
+    else if (c == ',' && !quoted) out.emplace_back();
+    else if (c != '\r') out.back() += c;
+  }
+  return out;
+}
+
+struct LabelledCase {
+  std::string name, effects, dominant;
+};
+
+std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
+  std::ifstream f(file);
+  if (!f) throw std::runtime_error(file.string() + ": cannot read the labels");
+  std::string line;
+  std::getline(f, line);
+  const auto header = csv_fields(line);
+  const auto column = [&](const std::string& name) {
+    const auto it = std::find(header.begin(), header.end(), name);
+    if (it == header.end()) throw std::runtime_error(file.string() + ":1: no column '" + name + "'");
+    return static_cast<size_t>(it - header.begin());
+  };
+  const size_t c_case = column("case"), c_effects = column("effects"), c_dominant = column("dominant");
+  std::vector<LabelledCase> cases;
+  for (long n = 2; std::getline(f, line); ++n) {
+    if (line.empty()) continue;
+    const auto v = csv_fields(line);
+    if (v.size() < header.size())
+      throw std::runtime_error(file.string() + ":" + std::to_string(n) + ": " + std::to_string(v.size()) + " fields, expected " +
+                               std::to_string(header.size()));
+    cases.push_back({v[c_case], v[c_effects], v[c_dominant]});
+  }
+  return cases;
+}
+
+struct CaseOutcome {
+  std::string verdict, mixture, error;
+  double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
+};
+
+CaseOutcome run_case(const std::filesystem::path& dir) {
+  namespace fs = std::filesystem;
+  CaseOutcome o;
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".csv") a.recordings.push_back(e.path().string());
+  std::sort(a.recordings.begin(), a.recordings.end());
+  a.quiet = true;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    const auto d = run_diagnose(a).result;
+    o.verdict = d.verdict;
+    for (const auto& e : d.mixture) o.mixture += (o.mixture.empty() ? "" : "+") + std::string(to_string(e.kind));
+    o.ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
+    o.ratio_aligned = d.fitted.rmse_validation_um / d.aligned.rmse_validation_um;
+  } catch (const std::exception& e) {
+    o.verdict = "error";
+    o.error = e.what();
+  }
+  o.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return o;
+}
+
+bool names_both(const std::string& mixture, const std::string& effects) {
+  const auto plus = effects.find('+');
+  const auto has = [&](const std::string& n) {
+    return ("+" + mixture + "+").find("+" + n + "+") != std::string::npos;
+  };
+  return plus != std::string::npos && has(effects.substr(0, plus)) && has(effects.substr(plus + 1));
+}
+
+}  // namespace
+
+DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit) {
+  namespace fs = std::filesystem;
+  auto cases = read_labels(fs::path(dir) / "labels.csv");
+  if (limit > 0 && static_cast<size_t>(limit) < cases.size()) cases.resize(static_cast<size_t>(limit));
+  std::vector<CaseOutcome> out(cases.size());
+  std::atomic<size_t> next{0};
+  std::mutex log_mutex;
+  DirectorySuiteResult r;
+  double time_sum = 0.0;
+  const auto worker = [&] {
+    for (size_t i = next++; i < cases.size(); i = next++) {
+      out[i] = run_case(fs::path(dir) / cases[i].name);
+      const auto& c = cases[i];
+      const auto& o = out[i];
+      const bool single = c.effects.find('+') == std::string::npos;
+      const bool ok = single ? o.verdict == c.effects : names_both(o.mixture, c.effects);
+      char line[512];
+      std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s%s%s\n",
+                    c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
+                    ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.error.empty() ? "" : "  error: ", o.error.c_str());
+      const std::lock_guard lock(log_mutex);
+      log << line << std::flush;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 0; j < std::max(jobs, 1); ++j) pool.emplace_back(worker);
+  for (auto& t : pool) t.join();
+  for (size_t i = 0; i < cases.size(); ++i) {
+    const auto& c = cases[i];
+    const auto& o = out[i];
+    ++r.cases;
+    r.failed += o.verdict == "error";
+    r.max_case_s = std::max(r.max_case_s, o.seconds);
+    time_sum += o.seconds;
+    if (c.effects.find('+') != std::string::npos) {
+      ++r.mixture_cases;
+      r.mixture_both_named += names_both(o.mixture, c.effects);
+      r.mixture_dominant_correct += o.verdict == c.dominant;
+      if (o.verdict == c.dominant) r.ratios.push_back(o.ratio), r.ratios_aligned.push_back(o.ratio_aligned);
+      continue;
+    }
+    const int truth = label_index(c.effects), verdict = label_index(o.verdict);
+    ++r.confusion[static_cast<size_t>(truth)][static_cast<size_t>(verdict)];
+    if (c.effects == "none") {
+      ++r.none_cases;
+      r.false_alarms += o.verdict != "none";
+    } else {
+      ++r.single_cases;
+      if (o.verdict == c.effects) {
+        ++r.single_correct;
+        r.ratios.push_back(o.ratio);
+        r.ratios_aligned.push_back(o.ratio_aligned);
+      }
+    }
+  }
+  r.mean_case_s = r.cases ? time_sum / r.cases : 0.0;
+  return r;
+}
+
+std::string format_directory_suite(const DirectorySuiteResult& r) {
+  BlindSuiteResult matrix;
+  matrix.confusion = r.confusion;
+  std::string s = format_suite(matrix);
+  s = s.substr(0, s.find("accuracy"));  // the matrix only; the scores follow with the issue 11 targets
+  char b[2048];
+  const auto pct = [](int a, int n) { return n ? 100.0 * a / n : NAN; };
+  const double acc = pct(r.single_correct, r.single_cases), fa = pct(r.false_alarms, r.none_cases),
+               both = pct(r.mixture_both_named, r.mixture_cases);
+  double mean = 0.0, worst = 0.0, worst_aligned = 0.0;
+  for (double x : r.ratios) mean += x / static_cast<double>(r.ratios.size()), worst = std::max(worst, x);
+  for (double x : r.ratios_aligned) worst_aligned = std::max(worst_aligned, x);
+  std::vector<double> sorted = r.ratios;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted.empty() ? NAN : sorted[sorted.size() / 2];
+  std::snprintf(b, sizeof b,
+                "cases %d (single effects %d, none %d, mixtures %d; %d stopped with an error)\n"
+                "single-effect accuracy %d/%d = %.1f%% (target >= 95%%: ratio %.2f)\n"
+                "false alarms on none %d/%d = %.1f%% (target <= 2%%: ratio %.2f)\n"
+                "mixtures with both effects named %d/%d = %.1f%% (target >= 80%%: ratio %.2f); dominant named %d/%d\n"
+                "held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
+                "  against the nominal with offset and start state fitted: worst %.3f\n"
+                "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n",
+                r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed, r.single_correct, r.single_cases, acc,
+                acc / 95.0, r.false_alarms, r.none_cases, fa, fa / 2.0, r.mixture_both_named, r.mixture_cases, both,
+                both / 80.0, r.mixture_dominant_correct, r.mixture_cases, mean, median, worst, worst / 0.5, worst_aligned, r.mean_case_s,
+                r.max_case_s, r.max_case_s / 30.0);
+  return s + b;
 }
 
 }  // namespace pvcgel::tools

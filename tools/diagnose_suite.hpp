@@ -38,3 +38,29 @@ BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& lo
 std::string format_suite(const BlindSuiteResult& r);
 
 }  // namespace pvcgel::tools
+
+namespace pvcgel::tools {
+
+/// Scores of a suite of case directories made elsewhere (`pvcgel bench diagnose --suite DIR`).
+struct DirectorySuiteResult {
+  static constexpr int kLabels = 12;  ///< as BlindSuiteResult: none, the ten effects, unexplained
+  std::array<std::array<int, kLabels>, kLabels> confusion{};  ///< single effects and none: [truth][verdict]
+  int single_cases = 0, single_correct = 0;
+  int none_cases = 0, false_alarms = 0;
+  int mixture_cases = 0, mixture_both_named = 0, mixture_dominant_correct = 0;
+  int failed = 0;                                ///< cases the tool stopped on with an error
+  std::vector<double> ratios;                    ///< held-out RMSE fitted / nominal on correct effect cases
+  std::vector<double> ratios_aligned;            ///< the same against the nominal with offset and start state fitted
+  double max_case_s = 0.0, mean_case_s = 0.0;
+  int cases = 0;
+};
+
+/// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;
+/// labels from DIR/labels.csv, read only to score) with `jobs` parallel cases.
+/// One line per case goes to `log`. `limit` > 0 stops after that many cases.
+DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit = 0);
+
+/// The confusion matrix and the scores, each with the target and the ratio to it.
+std::string format_directory_suite(const DirectorySuiteResult& r);
+
+}  // namespace pvcgel::tools

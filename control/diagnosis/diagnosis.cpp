@@ -4,10 +4,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <numeric>
+#include <span>
 #include <stdexcept>
 
 #include "control/config_error.hpp"
+#include "control/state_space.hpp"
 
 namespace pvcgel::control::diagnosis {
 
@@ -30,21 +33,100 @@ struct SquaredError {
   [[nodiscard]] double mse() const { return n > 0 ? sum / n : 0.0; }
 };
 
-/// Internal (fit) coordinates: log for scale parameters, range-normalised otherwise.
-struct Coordinates {
+/// The bounded refit of the nominal model that is fitted as a nonlinear nuisance:
+/// G's time constants scaled by time_scale, f's coefficients above the linear one by shape.
+struct Nominal {
+  Nominal(double ts = 1.0, double sh = 1.0) : time_scale(ts), shape(sh) {}  // NOLINT: a bare time scale converts
+  double time_scale, shape;
+  [[nodiscard]] bool identity() const { return time_scale == 1.0 && shape == 1.0; }
+};
+
+/// Internal (fit) coordinates of a joint fit: the effects' parameters, then
+/// (optionally) G's time scale; log for scale parameters, range-normalised otherwise.
+struct FitSpace {
+  std::vector<EffectKind> kinds;
   std::vector<ParameterSpec> specs;
+  std::vector<size_t> first;  ///< index of each kind's first parameter in specs
+  bool time_scale = false;    ///< the last two specs are the nominal refit (G's time scale, f's shape)
+
+  FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
+           const std::vector<Series>* data = nullptr);
   [[nodiscard]] double scale(size_t i) const { return (specs[i].upper - specs[i].lower) / 100.0; }
-  [[nodiscard]] double to_z(size_t i, double p) const {
-    return specs[i].log_scale ? std::log(p) : p / scale(i);
-  }
+  [[nodiscard]] double to_z(size_t i, double p) const { return specs[i].log_scale ? std::log(p) : p / scale(i); }
   [[nodiscard]] double to_p(size_t i, double z) const {
     const double p = specs[i].log_scale ? std::exp(z) : z * scale(i);
     return std::clamp(p, specs[i].lower, specs[i].upper);
   }
+  [[nodiscard]] size_t end_of(size_t e) const {
+    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? 2 : 0);
+  }
+  [[nodiscard]] std::vector<Effect> effects(const Eigen::VectorXd& z) const {
+    std::vector<Effect> out;
+    for (size_t e = 0; e < kinds.size(); ++e) {
+      Effect x{kinds[e], {}};
+      for (size_t i = first[e]; i < end_of(e); ++i) x.p[i - first[e]] = to_p(i, z(static_cast<Eigen::Index>(i)));
+      out.push_back(x);
+    }
+    return out;
+  }
+  [[nodiscard]] Nominal g_scale(const Eigen::VectorXd& z) const {
+    if (!time_scale) return {};
+    return {to_p(specs.size() - 2, z(z.size() - 2)), to_p(specs.size() - 1, z(z.size() - 1))};
+  }
+  /// z of given effects (kinds in this order) and time scale.
+  [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
+    Eigen::VectorXd z(static_cast<Eigen::Index>(specs.size()));
+    for (size_t n = 0; n < kinds.size(); ++n)
+      for (size_t i = first[n]; i < end_of(n); ++i)
+        z(static_cast<Eigen::Index>(i)) = to_z(i, std::clamp(e[n].p[i - first[n]], specs[i].lower, specs[i].upper));
+    if (time_scale) {
+      z(z.size() - 2) = to_z(specs.size() - 2, k.time_scale);
+      z(z.size() - 1) = to_z(specs.size() - 1, k.shape);
+    }
+    return z;
+  }
 };
 
-/// Puts `plant` at rest where it explains the first measured samples.
-double rest_at_start(AugmentedPlant& plant, const Series& s) {
+/// Starting points that depend on the data: a slew limit only matters below
+/// the fastest recorded voltage rate, a dead zone only where |u| comes low.
+void add_data_starts(EffectKind kind, std::vector<ParameterSpec>& specs, const std::vector<Series>& data) {
+  if (kind == EffectKind::slew_limit) {
+    double rate = 0.0;
+    for (const auto& s : data)
+      for (size_t k = 1; k < s.u_V.size(); ++k) rate = std::max(rate, std::abs(s.u_V[k] - s.u_V[k - 1]) / s.sample_time_s);
+    for (double q : {0.25, 0.4, 0.55, 0.7, 0.8, 0.9, 0.95, 0.98})
+      if (q * rate > specs[0].lower && q * rate < specs[0].upper) specs[0].starts.push_back(q * rate);
+  } else if (kind == EffectKind::dead_zone) {
+    std::vector<double> a;
+    for (const auto& s : data)
+      for (double u : s.u_V) a.push_back(std::abs(u));
+    auto q = a.begin() + static_cast<std::ptrdiff_t>(a.size() / 50);
+    std::nth_element(a.begin(), q, a.end());
+    const double u_lo = *q;
+    if (u_lo < 1e-3 * specs[0].upper) return;
+    for (double f : {0.1, 0.3, 0.6}) specs[0].starts.push_back(f * u_lo);
+    for (double f : {0.3, 0.7, 1.0, 1.3}) specs[1].starts.push_back(f * u_lo);
+  }
+}
+
+FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
+                   const std::vector<Series>* data)
+    : kinds(std::move(k)), time_scale(with_nominal) {
+  for (auto kind : kinds) {
+    first.push_back(specs.size());
+    auto sp = parameter_specs(kind, d);
+    if (data) add_data_starts(kind, sp, *data);
+    specs.insert(specs.end(), sp.begin(), sp.end());
+  }
+  if (time_scale) {
+    const double t = o.time_scale_tolerance, f = o.poly_shape_tolerance;
+    specs.push_back({"time_scale", 1.0 / (1.0 + t), 1.0 + t, true, {1.0}});
+    specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
+  }
+}
+
+/// The rest voltage (steady state) whose output matches the first measured samples.
+double rest_from_output(AugmentedPlant& plant, const Series& s) {
   // Intercept of a line through the first 10 samples: the recording may start moving at once.
   const size_t n = std::min<size_t>(10, s.y_um.size());
   double sk = 0, sy = 0, skk = 0, sky = 0;
@@ -59,13 +141,27 @@ double rest_at_start(AugmentedPlant& plant, const Series& s) {
   const double slope = n > 1 ? (N * sky - sk * sy) / (N * skk - sk * sk) : 0.0;
   const double y0 = (sy - slope * sk) / N;
   const auto [lo, hi] = std::minmax_element(s.u_V.begin(), s.u_V.end());
-  return plant.rest_voltage(y0, *lo - 200.0, *hi + 200.0);
+  const double margin = 0.2 * std::max(*hi - *lo, 1e-6);
+  return plant.rest_voltage(y0, *lo - margin, *hi + margin);
 }
 
+/// A model's prediction after the nuisance projection.
+struct Prediction {
+  std::vector<std::vector<double>> y;  ///< per recording, all simulated samples
+  double gain = 1.0;
+  std::vector<double> offset_um;
+};
+
+/// Simulates candidate models and fits the nuisance parameters that enter
+/// linearly by least squares on the fit samples (variable projection): the
+/// overall gain (bounded), a sensor offset per recording and the initial
+/// state of G per recording (G's free-response modes), so no candidate is
+/// blamed for a start not at rest, an offset or a gain error.
 class Problem {
  public:
-  Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out, int io)
-      : model_(m), data_(d), held_out_(held_out), io_(io) {
+  Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
+          double gain_tolerance)
+      : model_(m), data_(d), held_out_(held_out), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
       size_t last = 0;
@@ -73,47 +169,142 @@ class Problem {
         if (!mask[k]) last = k + 1;
       end_.push_back(last);
     }
+    initial_V_.assign(d.size(), NAN);
   }
+  void set_delay(double io) { io_ = io; }
+  [[nodiscard]] double delay() const { return io_; }
+  void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
+  [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
 
-  /// Fit-segment residual of `e`; simulates only up to the end of each fit segment.
-  Eigen::VectorXd residual(const Effect& e) {
+  /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
+  std::vector<std::vector<double>> raw(std::span<const Effect> e, Nominal k, bool all) {
     ++simulations_;
-    Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
-    Eigen::Index j = 0;
+    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape);
+    std::vector<std::vector<double>> out;
     for (size_t r = 0; r < data_.size(); ++r) {
       const auto& s = data_[r];
-      AugmentedPlant plant(model_, io_, s.sample_time_s, e);
-      rest_at_start(plant, s);
-      for (size_t k = 0; k < end_[r]; ++k) {
-        if (!held_out_[r][k]) out(j++) = s.y_um[k] - plant.output();
-        plant.apply(s.u_V[k]);
-      }
+      AugmentedPlant plant(mk, io_, s.sample_time_s, e);
+      const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s) : initial_V_[r];
+      const size_t n = all ? s.u_V.size() : end_[r];
+      std::vector<double> u(s.u_V.begin(), s.u_V.begin() + static_cast<std::ptrdiff_t>(n));
+      out.push_back(plant.simulate(u, v0));
     }
+    return out;
+  }
+
+  /// Projects a raw simulation: gain (fitted or 1), offset and initial-state modes per recording.
+  Prediction project(std::vector<std::vector<double>> yhat, double time_scale, bool fit_gain);
+
+  Prediction predict(std::span<const Effect> e, Nominal k, bool fit_gain, bool all = true) {
+    return project(raw(e, k, all), k.time_scale, fit_gain);
+  }
+
+  /// Fit-segment residual after the projection.
+  Eigen::VectorXd residual(std::span<const Effect> e, Nominal k) {
+    const auto p = predict(e, k, true, false);
+    Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
+    Eigen::Index j = 0;
+    for (size_t r = 0; r < data_.size(); ++r)
+      for (size_t i = 0; i < end_[r]; ++i)
+        if (!held_out_[r][i]) out(j++) = data_[r].y_um[i] - p.y[r][i];
     return out;
   }
   [[nodiscard]] int simulations() const { return simulations_; }
 
  private:
+  /// Free response of G (time-scaled by k) from each unit state, per recording.
+  const std::vector<std::vector<Eigen::VectorXd>>& modes(double k);
+
   const HammersteinModel& model_;
   const std::vector<Series>& data_;
   const std::vector<std::vector<char>>& held_out_;
   std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
-  int io_;
+  std::vector<double> initial_V_;
+  double io_ = 1.0;
+  double gain_lo_, gain_hi_;
   size_t n_fit_ = 0;
   int simulations_ = 0;
+  double modes_k_ = NAN;
+  std::vector<std::vector<Eigen::VectorXd>> modes_;
 };
 
-Effect make_effect(EffectKind kind, const Coordinates& c, const Eigen::VectorXd& z) {
-  Effect e{kind, {}};
-  for (size_t i = 0; i < c.specs.size(); ++i) e.p[i] = c.to_p(i, z(static_cast<Eigen::Index>(i)));
-  return e;
+const std::vector<std::vector<Eigen::VectorXd>>& Problem::modes(double k) {
+  if (k == modes_k_) return modes_;
+  modes_k_ = k;
+  modes_.clear();
+  StateSpace ss = realize(model_.G, "model.G");
+  ss.A /= k;
+  ss.B /= k;
+  for (const auto& s : data_) {
+    const auto d = discretize_zoh(ss, s.sample_time_s);
+    const auto n = d.A.rows();
+    const auto N = static_cast<Eigen::Index>(s.y_um.size());
+    std::vector<Eigen::VectorXd> cols(static_cast<size_t>(n), Eigen::VectorXd(N));
+    for (Eigen::Index i = 0; i < n; ++i) {
+      Eigen::VectorXd x = Eigen::VectorXd::Unit(n, i);
+      for (Eigen::Index t = 0; t < N; ++t) {
+        cols[static_cast<size_t>(i)](t) = d.C.dot(x);
+        x = d.A * x;
+      }
+    }
+    modes_.push_back(std::move(cols));
+  }
+  return modes_;
+}
+
+Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain) {
+  const auto& m = modes(k);
+  const size_t R = data_.size();
+  std::vector<Eigen::VectorXd> u_y(R), u_h(R);
+  double num = 0.0, den = 0.0;
+  for (size_t r = 0; r < R; ++r) {
+    const auto q = static_cast<Eigen::Index>(m[r].size() + 1);
+    Eigen::MatrixXd L = Eigen::MatrixXd::Zero(q, q);
+    Eigen::VectorXd py = Eigen::VectorXd::Zero(q), ph = Eigen::VectorXd::Zero(q), psi(q);
+    double hy = 0.0, hh = 0.0;
+    for (size_t i = 0; i < end_[r]; ++i) {
+      if (held_out_[r][i]) continue;
+      psi(0) = 1.0;
+      for (size_t c = 0; c < m[r].size(); ++c) psi(static_cast<Eigen::Index>(c + 1)) = m[r][c](static_cast<Eigen::Index>(i));
+      const double y = data_[r].y_um[i], h = yhat[r][i];
+      L.selfadjointView<Eigen::Lower>().rankUpdate(psi);
+      py += y * psi;
+      ph += h * psi;
+      hy += h * y;
+      hh += h * h;
+    }
+    L = L.selfadjointView<Eigen::Lower>();
+    L.diagonal().array() += 1e-12 * L.diagonal().maxCoeff() + 1e-300;
+    const auto ldlt = L.ldlt();
+    u_y[r] = ldlt.solve(py);
+    u_h[r] = ldlt.solve(ph);
+    num += hy - ph.dot(u_y[r]);
+    den += hh - ph.dot(u_h[r]);
+  }
+  Prediction p;
+  p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_lo_, gain_hi_) : 1.0;
+  for (size_t r = 0; r < R; ++r) {
+    const Eigen::VectorXd c = u_y[r] - p.gain * u_h[r];
+    p.offset_um.push_back(c(0));
+    auto& y = yhat[r];
+    for (size_t i = 0; i < y.size(); ++i) {
+      double v = p.gain * y[i] + c(0);
+      for (size_t j = 0; j < m[r].size(); ++j) v += c(static_cast<Eigen::Index>(j + 1)) * m[r][j](static_cast<Eigen::Index>(i));
+      y[i] = v;
+    }
+  }
+  p.y = std::move(yhat);
+  return p;
 }
 
 /// Bounded Levenberg-Marquardt on the simulated output, numerical Jacobian.
-Eigen::VectorXd levenberg_marquardt(Problem& problem, EffectKind kind, const Coordinates& c, Eigen::VectorXd z,
-                                    double& cost) {
+Eigen::VectorXd levenberg_marquardt(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost) {
   const auto n = z.size();
-  Eigen::VectorXd r = problem.residual(make_effect(kind, c, z));
+  const auto eval = [&](const Eigen::VectorXd& zz) {
+    const auto e = c.effects(zz);
+    return problem.residual(e, c.g_scale(zz));
+  };
+  Eigen::VectorXd r = eval(z);
   cost = r.squaredNorm();
   double lambda = 1e-2;
   for (int iter = 0; iter < 25; ++iter) {
@@ -125,7 +316,7 @@ Eigen::VectorXd levenberg_marquardt(Problem& problem, EffectKind kind, const Coo
       // At an upper bound, difference backwards so the step is not clamped away.
       const double p_plus = c.to_p(static_cast<size_t>(i), zh(i));
       if (p_plus == c.to_p(static_cast<size_t>(i), z(i))) zh(i) = z(i) - h;
-      J.col(i) = (r - problem.residual(make_effect(kind, c, zh))) / (zh(i) - z(i));  // d(yhat)/dz
+      J.col(i) = (r - eval(zh)) / (zh(i) - z(i));  // d(yhat)/dz
     }
     const Eigen::MatrixXd JtJ = J.transpose() * J;
     const Eigen::VectorXd Jtr = J.transpose() * r;
@@ -136,7 +327,7 @@ Eigen::VectorXd levenberg_marquardt(Problem& problem, EffectKind kind, const Coo
       Eigen::VectorXd z_new = z + Aug.ldlt().solve(Jtr);
       for (Eigen::Index i = 0; i < n; ++i)
         z_new(i) = c.to_z(static_cast<size_t>(i), c.to_p(static_cast<size_t>(i), z_new(i)));
-      const Eigen::VectorXd r_new = problem.residual(make_effect(kind, c, z_new));
+      const Eigen::VectorXd r_new = eval(z_new);
       const double cost_new = r_new.squaredNorm();
       if (cost_new < cost) {
         const double gain = (cost - cost_new) / cost;
@@ -153,7 +344,6 @@ Eigen::VectorXd levenberg_marquardt(Problem& problem, EffectKind kind, const Coo
   }
   return z;
 }
-
 ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
                       const std::vector<std::vector<char>>& held_out) {
   SquaredError all, fit, val;
@@ -172,28 +362,6 @@ std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& s
   return s;
 }
 
-/// Starting points that depend on the data: a slew limit only matters below
-/// the fastest recorded voltage rate, a dead zone only where |u| comes low.
-void add_data_starts(EffectKind kind, std::vector<ParameterSpec>& specs, const std::vector<Series>& data) {
-  if (kind == EffectKind::slew_limit) {
-    double rate = 0.0;
-    for (const auto& s : data)
-      for (size_t k = 1; k < s.u_V.size(); ++k) rate = std::max(rate, std::abs(s.u_V[k] - s.u_V[k - 1]) / s.sample_time_s);
-    for (double q : {0.25, 0.4, 0.55, 0.7, 0.8, 0.9, 0.95, 0.98})
-      if (q * rate > specs[0].lower) specs[0].starts.push_back(q * rate);
-  } else if (kind == EffectKind::dead_zone) {
-    std::vector<double> a;
-    for (const auto& s : data)
-      for (double u : s.u_V) a.push_back(std::abs(u));
-    auto q = a.begin() + static_cast<std::ptrdiff_t>(a.size() / 50);
-    std::nth_element(a.begin(), q, a.end());
-    const double u_lo = *q;
-    if (u_lo < 1.0) return;
-    for (double f : {0.1, 0.3, 0.6}) specs[0].starts.push_back(f * u_lo);
-    for (double f : {0.3, 0.7, 1.0, 1.3}) specs[1].starts.push_back(f * u_lo);
-  }
-}
-
 }  // namespace
 
 std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) {
@@ -210,10 +378,17 @@ double estimate_noise_sigma(const std::vector<double>& y) {
   std::vector<double> d;
   d.reserve(y.size());
   for (size_t k = 2; k < y.size(); ++k) d.push_back(std::abs(y[k] - 2.0 * y[k - 1] + y[k - 2]));
-  auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
-  std::nth_element(d.begin(), mid, d.end());
-  // White noise: var(second difference) = 6 sigma^2; median |N(0,1)| = 0.6745.
-  return *mid / 0.6745 / std::sqrt(6.0);
+  std::vector<double> sorted = d;
+  auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+  std::nth_element(sorted.begin(), mid, sorted.end());
+  // White noise: var(second difference) = 6 sigma^2. The mean |d| (E|N(0,1)| = sqrt(2/pi)) over the
+  // values below 5 medians ignores steps and spikes, and unlike the median it does not snap to the
+  // quantisation steps of a quantised sensor.
+  const double cap = *mid > 0.0 ? 5.0 * *mid : INFINITY;
+  double sum = 0.0, n = 0.0;
+  for (double v : d)
+    if (v <= cap) sum += v, n += 1.0;
+  return n > 0.0 ? sum / n * std::sqrt(std::numbers::pi / 2.0) / std::sqrt(6.0) : 0.0;
 }
 
 std::string describe_regime(const Series& s, size_t b, size_t e) {
@@ -285,42 +460,207 @@ std::vector<std::vector<double>> simulate(const HammersteinModel& model, const E
   std::vector<std::vector<double>> out;
   for (const auto& s : data) {
     AugmentedPlant plant(model, io, s.sample_time_s, effect);
-    out.push_back(plant.simulate(s.u_V, rest_at_start(plant, s)));
+    out.push_back(plant.simulate(s.u_V, rest_from_output(plant, s)));
   }
   return out;
 }
 
-DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
-  if (data.empty()) throw std::invalid_argument("no recordings");
-  if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
-  double u_max = 0.0, duration = 0.0;
-  for (const auto& s : data) {
-    check_series(s, model);
-    for (double u : s.u_V) u_max = std::max(u_max, std::abs(u));
-    duration = std::max(duration, s.t_s.back() - s.t_s.front());
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape) {
+  HammersteinModel m = model;
+  if (time_scale != 1.0) m.G = time_scaled(model.G, time_scale);
+  if (poly_shape != 1.0) {
+    auto c = model.f.coefficients();
+    for (size_t i = 1; i < c.size(); ++i) c[i] *= poly_shape;
+    m.f = OddPolynomial(c);
   }
-  if (const auto turn = model.f.first_turnover(std::max(u_max, 1.0)))
-    throw ConfigError("model.poly", "f is not monotone: f'(x) reaches 0 at x = " + fmt("%.1f", *turn) +
-                                        " V, inside the recorded voltage range (|u| up to " + fmt("%.1f", u_max) + " V)");
+  return m;
+}
 
-  DiagnosisResult res;
-  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-  const auto& split = res.held_out;
+TransferFunction time_scaled(const TransferFunction& G, double factor) {
+  // G(factor s): the coefficient of s^i is multiplied by factor^i.
+  const auto scale = [&](std::vector<double> c) {
+    for (size_t i = 0; i < c.size(); ++i) c[i] *= std::pow(factor, static_cast<double>(c.size() - 1 - i));
+    return c;
+  };
+  return TransferFunction(scale(G.num()), scale(G.den()));
+}
 
-  // 1. Simulate the nominal model (output error, from rest at u[0]).
-  res.y_baseline_um = simulate(model, {}, data, o.io_delay_samples);
-  res.baseline = errors_of(data, res.y_baseline_um, split);
-  std::vector<double> sigmas;
-  for (const auto& s : data) sigmas.push_back(estimate_noise_sigma(s.y_um));
-  std::sort(sigmas.begin(), sigmas.end());
-  const double sigma = std::max(sigmas[sigmas.size() / 2], 1e-9);
-  res.noise_sigma_um = sigma;
+namespace {
 
-  // 2. Locate: windows whose residual RMS exceeds the noise.
-  bool any_window = false;
+/// Upper quantile of the standard normal: z with P(Z > z) = p.
+double normal_upper_quantile(double p) {
+  double lo = 0.0, hi = 40.0;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(mid / std::sqrt(2.0)) > p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+/// Upper quantile of chi-square(n) / n at tail probability p (Wilson-Hilferty).
+double chi2_mean_upper_quantile(double n, double p) {
+  const double v = 2.0 / (9.0 * n), z = normal_upper_quantile(p);
+  return std::pow(1.0 - v + z * std::sqrt(v), 3.0);
+}
+
+/// Ljung-Box statistic of `r` over lags 1..m (chi-square(m) for white noise).
+double ljung_box(const std::vector<double>& r, int m) {
+  const size_t n = r.size();
+  const double mean = std::accumulate(r.begin(), r.end(), 0.0) / static_cast<double>(n);
+  double c0 = 0.0;
+  for (double v : r) c0 += (v - mean) * (v - mean);
+  double q = 0.0;
+  for (int lag = 1; lag <= m && static_cast<size_t>(lag) < n; ++lag) {
+    double c = 0.0;
+    for (size_t k = static_cast<size_t>(lag); k < n; ++k) c += (r[k] - mean) * (r[k - static_cast<size_t>(lag)] - mean);
+    const double rho = c / std::max(c0, 1e-300);
+    q += rho * rho / static_cast<double>(n - static_cast<size_t>(lag));
+  }
+  return static_cast<double>(n) * static_cast<double>(n + 2) * q;
+}
+
+size_t window_samples(const Series& s, const DiagnosisOptions& o) {
+  return std::max<size_t>(50, static_cast<size_t>(std::lround(o.window_s / s.sample_time_s)));
+}
+
+/// The `none` test on residuals: every window's mean square against the noise
+/// variance (chi-square, Bonferroni over the windows, with a margin for the
+/// uncertainty of the noise estimate), and Ljung-Box whiteness per recording
+/// (Bonferroni over the recordings). Half the false-alarm rate goes to each.
+NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat, double sigma,
+                   const DiagnosisOptions& o) {
+  NoneTest t;
+  t.false_alarm_rate = o.false_alarm_rate;
+  size_t total = 0;
+  for (const auto& s : data) {
+    const size_t w = window_samples(s, o);
+    t.windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / w));
+    total += s.y_um.size();
+  }
+  // Relative standard error of a median-based sigma from `total` samples is ~1.17/sqrt(N): its
+  // one-sided 99% bound widens the variance threshold by 2 * 2.33 * that.
+  const double sigma_margin = 1.0 + 2.0 * 2.33 * 1.17 / std::sqrt(static_cast<double>(total));
+  constexpr int kLags = 10;
+  t.whiteness_threshold = kLags * chi2_mean_upper_quantile(kLags, 0.5 * o.false_alarm_rate / static_cast<double>(data.size()));
   for (size_t r = 0; r < data.size(); ++r) {
     const auto& s = data[r];
-    const size_t w = std::max<size_t>(50, static_cast<size_t>(std::lround(o.window_s / s.sample_time_s)));
+    const size_t w = window_samples(s, o);
+    std::vector<double> res(s.y_um.size());
+    for (size_t k = 0; k < res.size(); ++k) res[k] = s.y_um[k] - yhat[r][k];
+    for (size_t b = 0; b + w / 2 < res.size(); b += w) {
+      const size_t e = std::min(b + w, res.size());
+      double ss = 0.0;
+      for (size_t k = b; k < e; ++k) ss += res[k] * res[k];
+      const double n = static_cast<double>(e - b), ratio = ss / n / (sigma * sigma);
+      const double thr = chi2_mean_upper_quantile(n, 0.5 * o.false_alarm_rate / t.windows) * sigma_margin;
+      if (ratio / thr > t.worst_window_ratio / std::max(t.window_threshold, 1e-300) || t.window_threshold == 0.0) {
+        t.worst_window_ratio = ratio;
+        t.window_threshold = thr;
+      }
+    }
+    t.whiteness_q = std::max(t.whiteness_q, ljung_box(res, kLags));
+  }
+  t.level_ok = t.worst_window_ratio <= t.window_threshold;
+  t.white = t.whiteness_q <= t.whiteness_threshold;
+  return t;
+}
+
+/// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
+DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal) {
+  DataScale d;
+  // The slowest rate bounds the mode frequency; the fastest the delay line (in samples).
+  d.sample_time_s = 0.0;
+  d.sample_time_min_s = INFINITY;
+  for (const auto& s : data)
+    d.sample_time_s = std::max(d.sample_time_s, s.sample_time_s), d.sample_time_min_s = std::min(d.sample_time_min_s, s.sample_time_s);
+  d.duration_s = 0.0;
+  d.u_min_V = INFINITY;
+  d.u_max_V = -INFINITY;
+  d.y_abs_um = 0.0;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto& s = data[r];
+    d.duration_s = std::max(d.duration_s, s.t_s.back() - s.t_s.front());
+    for (double u : s.u_V) d.u_min_V = std::min(d.u_min_V, u), d.u_max_V = std::max(d.u_max_V, u);
+    for (double y : y_nominal[r]) d.y_abs_um = std::max(d.y_abs_um, std::abs(y));
+    for (double y : s.y_um) d.y_abs_um = std::max(d.y_abs_um, std::abs(y));
+  }
+  return d;
+}
+
+double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {
+  const auto r = p.residual(e, k);
+  return r.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(r.size(), 1));
+}
+
+/// Alignment: the rest voltage each recording starts from (u[0] or the one its
+/// first samples imply, whichever the nominal model fits better), then the I/O
+/// delay (whole samples, refined sub-sample by a parabola through the fit
+/// error when it has a clear minimum). Leaves `p` set to what the analysis uses.
+Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const DiagnosisOptions& o) {
+  Alignment a;
+  if (o.io_delay_declared) a.declared = o.io_delay_samples;
+  p.set_delay(o.io_delay_samples);
+  // Initial state: try both starts per recording (the modes absorb the rest of G's transient).
+  std::vector<double> from_y = p.initial(), at_u0;
+  for (const auto& s : data) at_u0.push_back(s.u_V.front());
+  p.set_initial(at_u0);
+  const auto pa = p.predict({}, 1.0, true, false);
+  p.set_initial(std::vector<double>(data.size(), NAN));
+  const auto pb = p.predict({}, 1.0, true, false);
+  std::vector<double> chosen;
+  for (size_t r = 0; r < data.size(); ++r) {
+    double ea = 0.0, eb = 0.0;
+    for (size_t k = 0; k < pa.y[r].size(); ++k)
+      ea += std::pow(data[r].y_um[k] - pa.y[r][k], 2), eb += std::pow(data[r].y_um[k] - pb.y[r][k], 2);
+    chosen.push_back(ea <= eb ? data[r].u_V.front() : NAN);
+  }
+  p.set_initial(chosen);
+  // Delay: search 0..max (an undeclared delay) or 0..declared + 2 (to check the file).
+  const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
+  std::vector<double> mse;
+  for (int d = 0; d <= max_d; ++d) {
+    p.set_delay(d);
+    mse.push_back(fit_mse(p, {}, 1.0));
+  }
+  const auto best = static_cast<int>(std::min_element(mse.begin(), mse.end()) - mse.begin());
+  a.io_delay_samples = best;
+  if (best > 0 && best < max_d) {
+    const double m0 = mse[static_cast<size_t>(best) - 1], m1 = mse[static_cast<size_t>(best)], m2 = mse[static_cast<size_t>(best) + 1];
+    const double curv = m0 - 2.0 * m1 + m2;
+    // Sub-sample only when the minimum is clearly curved (not flat within the noise of the MSE).
+    if (curv > 1e-3 * m1) a.io_delay_samples = best + std::clamp(0.5 * (m0 - m2) / curv, -0.5, 0.5);
+  }
+  // The analysis runs with whole samples (what a model file and the daemon can hold); the sub-sample
+  // estimate is reported, and a remainder of half a sample or more rounds up.
+  a.used_samples = o.io_delay_declared ? o.io_delay_samples : std::round(a.io_delay_samples);
+  if (a.declared && std::abs(a.io_delay_samples - *a.declared) >= 0.5) {
+    a.note = "the model file declares io_delay_samples = " + std::to_string(*a.declared) + ", but the data fit best with " +
+             fmt("%.2g", a.io_delay_samples) + " samples";
+    if (a.io_delay_samples < *a.declared) {
+      // Less delay than declared cannot be an effect: run with the estimate and say so.
+      a.used_samples = a.io_delay_samples;
+      a.note += " (less than declared: the analysis uses the estimate)";
+    } else {
+      a.note += " (the excess is judged as a delay effect)";
+    }
+  } else if (!a.declared) {
+    a.note = "the model file does not declare io_delay_samples: estimated " + fmt("%.2g", a.io_delay_samples) +
+             " samples from the data (searched 0.." + std::to_string(max_d) + "); " + fmt("%.0f", a.used_samples) + " used";
+  }
+  p.set_delay(a.used_samples);
+  a.initial_V = p.initial();
+  return a;
+}
+
+}  // namespace
+
+namespace {
+
+/// Localisation: windows whose residual RMS exceeds `ratio` times the noise, merged into mismatch windows.
+void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma, double ratio, const DiagnosisOptions& o) {
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto& s = data[r];
+    const size_t w = window_samples(s, o);
     MismatchWindow open;
     SquaredError open_err;
     bool is_open = false;
@@ -341,8 +681,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
       res.window_centre_s.push_back(0.5 * (s.t_s[b] + s.t_s[e - 1]));
       res.window_rms_um.push_back(rms);
       res.window_recording.push_back(static_cast<int>(r));
-      if (rms > o.window_flag_ratio * sigma) {
-        any_window = true;
+      if (rms > ratio * sigma) {
         if (!is_open) {
           open = MismatchWindow{static_cast<int>(r), s.t_s[b], 0.0, "", 0.0};
           open_err = {};
@@ -357,50 +696,45 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     }
     if (is_open) close(s.u_V.size());
   }
+}
 
-  res.fitted = res.baseline;
-  res.y_fitted_um = res.y_baseline_um;
-  if (!any_window && res.baseline.rmse_um <= o.none_ratio * sigma) {
-    res.verdict = "none";
-    res.explanation = std::string(physical_meaning(EffectKind::none)) + ": residual RMS " +
-                      fmt("%.3g", res.baseline.rmse_um) + " um against an estimated sensor noise of " +
-                      fmt("%.3g", sigma) + " um, and no window exceeds " + fmt("%.2g", o.window_flag_ratio) +
-                      " times the noise";
-    return res;
-  }
+/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
+Nominal refit_nominal(Problem& p, const DataScale& scale, const DiagnosisOptions& o) {
+  FitSpace space({}, scale, true, o);
+  double cost = 0.0;
+  const auto z = levenberg_marquardt(p, space, space.z_of({}, Nominal{}), cost);
+  return space.g_scale(z);
+}
 
-  // 3. Diagnose: coarse grid per candidate (the evidence), then least squares on the leading ones.
-  Problem problem(model, data, split, o.io_delay_samples);
-  const double base_cost = problem.residual({}).squaredNorm();
-  struct Start {
-    double cost;
-    Eigen::VectorXd z;
-  };
-  std::vector<std::vector<Start>> starts;
+/// Coarse grid (the evidence) for every candidate, then joint least squares
+/// (effect parameters and G's time scale; gain, offset and initial state by
+/// projection) from the two best grid points of the leading candidates.
+void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                    const DiagnosisOptions& o, double nuisance_cost) {
+  std::vector<std::vector<Eigen::VectorXd>> starts;
   for (EffectKind kind : kCandidateEffects) {
-    CandidateResult c;
-    c.effect.kind = kind;
-    c.specs = parameter_specs(kind, data.front().sample_time_s, duration);
-    add_data_starts(kind, c.specs, data);
-    Coordinates coords{c.specs};
-    std::vector<Start> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(c.specs.size()))}};
-    for (size_t i = 0; i < c.specs.size(); ++i) {
-      std::vector<Start> next;
+    FitSpace space({kind}, scale, false, o, &data);
+    std::vector<std::pair<double, Eigen::VectorXd>> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(space.specs.size()))}};
+    for (size_t i = 0; i < space.specs.size(); ++i) {
+      std::vector<std::pair<double, Eigen::VectorXd>> next;
       for (const auto& g : grid)
-        for (double v : c.specs[i].starts) {
-          Start s = g;
-          s.z(static_cast<Eigen::Index>(i)) = coords.to_z(i, std::clamp(v, c.specs[i].lower, c.specs[i].upper));
+        for (double v : space.specs[i].starts) {
+          auto s = g;
+          s.second(static_cast<Eigen::Index>(i)) = space.to_z(i, std::clamp(v, space.specs[i].lower, space.specs[i].upper));
           next.push_back(s);
         }
       grid = std::move(next);
     }
-    for (auto& g : grid) g.cost = problem.residual(make_effect(kind, coords, g.z)).squaredNorm();
-    std::sort(grid.begin(), grid.end(), [](const Start& a, const Start& b) { return a.cost < b.cost; });
-    c.evidence_r2 = std::max(0.0, 1.0 - grid.front().cost / base_cost);
-    c.effect = make_effect(kind, coords, grid.front().z);
+    for (auto& g : grid) g.first = problem.residual(space.effects(g.second), 1.0).squaredNorm();
+    std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    CandidateResult c;
+    c.specs = space.specs;
+    c.evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
+    c.effect = space.effects(grid.front().second).front();
     res.candidates.push_back(c);
-    grid.resize(std::min<size_t>(grid.size(), 2));
-    starts.push_back(grid);
+    std::vector<Eigen::VectorXd> best;
+    for (size_t i = 0; i < std::min<size_t>(grid.size(), 2); ++i) best.push_back(grid[i].second);
+    starts.push_back(best);
   }
   std::vector<size_t> order(res.candidates.size());
   std::iota(order.begin(), order.end(), 0);
@@ -408,22 +742,26 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank) {
     auto& c = res.candidates[order[rank]];
-    Coordinates coords{c.specs};
+    FitSpace space({c.effect.kind}, scale, true, o, &data);
     double best = INFINITY;
-    for (const auto& s : starts[order[rank]]) {
+    for (const auto& s0 : starts[order[rank]]) {
+      Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
+      z.head(s0.size()) = s0;
+      z.tail(2) = space.z_of({space.effects(z).front()}, Nominal{}).tail(2);
       double cost = 0.0;
-      const auto z = levenberg_marquardt(problem, c.effect.kind, coords, s.z, cost);
+      z = levenberg_marquardt(problem, space, z, cost);
       if (cost < best) {
         best = cost;
-        c.effect = make_effect(c.effect.kind, coords, z);
+        c.effect = space.effects(z).front();
+        c.time_scale = space.g_scale(z).time_scale;
+        c.poly_shape = space.g_scale(z).shape;
       }
     }
     c.fitted = true;
-  }
-  // 4. Choose by held-out error with a per-parameter penalty.
-  for (auto& c : res.candidates) {
-    if (!c.fitted) continue;
-    c.errors = errors_of(data, simulate(model, c.effect, data, o.io_delay_samples), split);
+    const std::vector<Effect> e{c.effect};
+    const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape), true);
+    c.gain = pred.gain;
+    c.errors = errors_of(data, pred.y, res.held_out);
     c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
               (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
   }
@@ -440,43 +778,242 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     if (b.score <= a.score * (1.0 + o.tie_margin) && fit_b * (1.0 + o.tie_margin) < fit_a)
       std::swap(res.candidates[0], res.candidates[1]);
   }
-  res.simulations = problem.simulations() + static_cast<int>(res.candidates.size());
-  for (auto& c : res.candidates) {
-    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
-                    (c.fitted ? "; validation RMSE " + fmt("%.3g", res.baseline.rmse_validation_um) + " -> " +
-                                    fmt("%.3g", c.errors.rmse_validation_um) + " um"
-                              : " (coarse grid only: not among the leading candidates)");
+}
+
+/// A fitted mixture of two effects.
+struct PairFit {
+  std::vector<Effect> effects;
+  Nominal nominal;
+  double gain = 1.0;
+  ModelErrors errors;
+  double score = INFINITY;
+};
+
+/// Fits the best single effect jointly with each of the next three fitted candidates.
+PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                  const DiagnosisOptions& o) {
+  PairFit best;
+  const auto& a = res.candidates.front();
+  int tried = 0;
+  for (size_t i = 1; i < res.candidates.size() && tried < 3; ++i) {
+    const auto& b = res.candidates[i];
+    if (!b.fitted) break;
+    const std::vector<Effect> start{a.effect, b.effect};
+    try {
+      validate_mixture(start, "mixture");
+    } catch (const ConfigError&) {
+      continue;  // two time-scale effects cannot run together
+    }
+    ++tried;
+    FitSpace space({a.effect.kind, b.effect.kind}, scale, true, o, &data);
+    double cost = 0.0;
+    const auto z = levenberg_marquardt(problem, space, space.z_of(start, Nominal(a.time_scale, a.poly_shape)), cost);
+    PairFit p;
+    p.effects = space.effects(z);
+    p.nominal = space.g_scale(z);
+    const auto pred = problem.predict(p.effects, p.nominal, true);
+    p.gain = pred.gain;
+    p.errors = errors_of(data, pred.y, res.held_out);
+    p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
+              (1.0 + o.penalty_per_parameter * static_cast<double>(space.specs.size() - 1));
+    if (p.score < best.score) best = p;
   }
-  const auto& best = res.candidates.front();
-  const double s2 = sigma * sigma;
-  const double base_val = res.baseline.rmse_validation_um, base_fit = res.baseline.rmse_fit_um;
+  return best;
+}
+
+bool rate_independent(EffectKind k) {
+  return k == EffectKind::hysteresis || k == EffectKind::dead_zone || k == EffectKind::saturation;
+}
+
+/// The experiment an experimentalist would run to tell two explanations apart.
+std::string separating_experiment(EffectKind a, EffectKind b) {
+  const auto has = [&](EffectKind k) { return a == k || b == k; };
+  const std::string names = std::string(to_string(a)) + " and " + std::string(to_string(b));
+  if (has(EffectKind::creep) || has(EffectKind::drift))
+    return "To separate " + names + ": hold the voltage constant for several time constants after a step, and "
+           "record a hold at a second level (creep follows the input and settles; drift continues without it; "
+           "a rate-independent loop shows no motion during a hold).";
+  if (rate_independent(a) != rate_independent(b))
+    return "To separate " + names + ": repeat the excitation at a frequency 5-10 times lower and higher with the "
+           "same amplitude (a rate-independent loop keeps its width; a lag or dynamic effect changes with frequency).";
+  if (rate_independent(a))
+    return "To separate " + names + ": repeat at two or three other amplitudes and biases, including one near 0 V "
+           "(a dead zone acts near zero, saturation at the largest displacement, a hysteresis loop at every reversal).";
+  return "To separate " + names + ": record steps of several sizes and sines at two amplitudes and two frequencies "
+         "(a delay shifts every response equally, a slew limit only fast large changes, a mode rings after steps, "
+         "dynamics that depend on bias or direction change with the level and the sign of motion).";
+}
+
+}  // namespace
+
+namespace {
+
+/// Verdict from the fitted candidates, judged against the nuisance-only refit:
+/// a single effect, a mixture of two (both significant on held-out data), or unexplained.
+void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+            const DiagnosisOptions& o) {
+  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
+  const auto& nuis = res.nominal_refit.errors;
   // Judge on the held-out data when the mismatch reaches it; otherwise on the fit segment.
-  const bool judge_val = base_val * base_val - s2 > 0.2 * s2;
-  const double excess_base = judge_val ? base_val * base_val - s2 : base_fit * base_fit - s2;
-  const double excess_best = judge_val ? best.errors.rmse_validation_um * best.errors.rmse_validation_um - s2
-                                       : best.errors.rmse_fit_um * best.errors.rmse_fit_um - s2;
+  const bool judge_val = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
+  const auto excess = [&](const ModelErrors& e) {
+    const double r = judge_val ? e.rmse_validation_um : e.rmse_fit_um;
+    return r * r - s2;
+  };
+  const double base = excess(nuis);
+  const auto& best = res.candidates.front();
+  const bool single_ok = best.fitted && base > 0.0 && excess(best.errors) <= o.explained_excess * base;
+  PairFit pair;
+  if (best.fitted && base > 0.0) pair = best_pair(res, problem, data, scale, o);
+  bool pair_ok = false;
+  if (std::isfinite(pair.score)) {
+    // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair.
+    const auto alone = [&](EffectKind k) {
+      for (const auto& c : res.candidates)
+        if (c.fitted && c.effect.kind == k) return excess(c.errors);
+      return base;
+    };
+    const double with_both = excess(pair.errors);
+    const double c0 = alone(pair.effects[1].kind) - with_both, c1 = alone(pair.effects[0].kind) - with_both;
+    const double second = std::min(c0, c1);
+    pair_ok = with_both <= o.explained_excess * base && second > 0.05 * s2 &&
+              with_both <= o.mixture_gain * std::min(alone(pair.effects[0].kind), alone(pair.effects[1].kind));
+    if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
+    if (pair_ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
+  }
+  std::vector<Effect> chosen;
+  Nominal k;
+  if (pair_ok) {
+    chosen = pair.effects;
+    k = pair.nominal;
+    res.fitted = pair.errors;
+  } else if (single_ok) {
+    chosen = {best.effect};
+    k = Nominal(best.time_scale, best.poly_shape);
+    res.fitted = best.errors;
+    res.contribution = {base - excess(best.errors)};
+    // Equally good single explanations are an answer, not a coin toss.
+    for (size_t i = 1; i < res.candidates.size(); ++i) {
+      const auto& c = res.candidates[i];
+      if (c.fitted && excess(c.errors) <= o.explained_excess * base &&
+          excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * base)
+        res.ambiguous_with.emplace_back(to_string(c.effect.kind));
+    }
+    if (!res.ambiguous_with.empty())
+      res.separating_experiment = separating_experiment(best.effect.kind, *parse_effect_kind(res.ambiguous_with.front()));
+  }
+  const std::string noise = fmt("%.3g", res.noise_sigma_um);
   const std::string runner_up =
       res.candidates.size() > 1 && res.candidates[1].fitted
           ? "; next best: " + std::string(to_string(res.candidates[1].effect.kind)) + " (validation RMSE " +
                 fmt("%.3g", res.candidates[1].errors.rmse_validation_um) + " um)"
           : "";
-  if (best.fitted && excess_base > 0.0 && excess_best <= o.explained_excess * excess_base) {
-    res.verdict = std::string(to_string(best.effect.kind));
-    res.chosen = best.effect.kind;
-    res.effect = best.effect;
-    res.fitted = best.errors;
-    res.y_fitted_um = simulate(model, best.effect, data, o.io_delay_samples);
-    res.explanation = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) + " um RMS against " +
-                      fmt("%.3g", sigma) + " um of sensor noise. Best explanation: " + best.explanation +
-                      " (noise " + fmt("%.3g", sigma) + " um)" + runner_up + ".";
-  } else {
+  const std::string lead = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) +
+                           " um RMS (nuisance-only refit: " + fmt("%.3g", nuis.rmse_um) + " um) against " + noise +
+                           " um of sensor noise. ";
+  if (chosen.empty()) {
     res.verdict = "unexplained";
-    res.explanation = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) + " um RMS against " +
-                      fmt("%.3g", sigma) + " um of sensor noise, and no candidate explains it: the best (" +
-                      std::string(to_string(best.effect.kind)) + ") leaves " +
-                      fmt("%.0f", 100.0 * std::max(excess_best, 0.0) / std::max(excess_base, 1e-300)) +
+    res.explanation = lead + "No candidate explains it: the best (" + std::string(to_string(best.effect.kind)) + ") leaves " +
+                      fmt("%.0f", 100.0 * std::max(excess(best.errors), 0.0) / std::max(base, 1e-300)) +
                       "% of the excess residual variance" + runner_up + ".";
+    return;
   }
+  res.mixture = chosen;
+  res.effect = chosen.front();
+  res.chosen = chosen.front().kind;
+  res.verdict = std::string(to_string(res.chosen));
+  // The nominal refit and the offset, as fitted jointly with the verdict's effects (what the augmented model runs).
+  const auto pc = problem.predict(chosen, k, true);
+  res.y_fitted_um = pc.y;
+  res.nominal_refit.gain = pc.gain;
+  res.nominal_refit.time_scale = k.time_scale;
+  res.nominal_refit.poly_shape = k.shape;
+  res.alignment.offset_um = pc.offset_um;
+  std::string text = lead + "Best explanation: " + best.explanation;
+  if (pair_ok)
+    text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
+           fmt("%.3g", res.contribution[0]) + " um^2 of held-out MSE) and " + std::string(to_string(chosen[1].kind)) +
+           " (" + fmt("%.3g", res.contribution[1]) + " um^2); held-out RMSE " + fmt("%.3g", nuis.rmse_validation_um) +
+           " -> " + fmt("%.3g", res.fitted.rmse_validation_um) + " um";
+  if (!res.ambiguous_with.empty()) {
+    std::string names;
+    for (const auto& n : res.ambiguous_with) names += (names.empty() ? "" : ", ") + n;
+    text += ". Ambiguous: " + names + " explains the held-out data as well. " + res.separating_experiment;
+  }
+  res.explanation = text + runner_up + ".";
+}
+
+}  // namespace
+
+DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
+  if (data.empty()) throw std::invalid_argument("no recordings");
+  if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
+  double u_max = 0.0;
+  for (const auto& s : data) {
+    check_series(s, model);
+    for (double u : s.u_V) u_max = std::max(u_max, std::abs(u));
+  }
+  if (const auto turn = model.f.first_turnover(std::max(u_max, 1e-9)))
+    throw ConfigError("model.poly", "f is not monotone: f'(x) reaches 0 at x = " + fmt("%.4g", *turn) +
+                                        " V, inside the recorded voltage range (|u| up to " + fmt("%.4g", u_max) + " V)");
+
+  DiagnosisResult res;
+  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+  Problem problem(model, data, res.held_out, o.gain_tolerance);
+  // 1. Alignment (nuisance): start state, I/O delay, offset; the nominal model with it is the baseline.
+  res.alignment = estimate_alignment(problem, data, o);
+  // The baseline is the model as the file states it (with the estimated delay when the file is silent);
+  // `aligned` adds the sensor offset and start state, which are not the model's fault.
+  const auto base = problem.predict({}, 1.0, false);
+  res.y_baseline_um = problem.raw({}, 1.0, true);
+  res.baseline = errors_of(data, res.y_baseline_um, res.held_out);
+  res.aligned = errors_of(data, base.y, res.held_out);
+  res.alignment.offset_um = base.offset_um;
+  // 2. Nuisance-only refit of the nominal model: gain and G's time scale within tolerance.
+  const DataScale scale = data_scale(data, base.y);
+  const Nominal k = refit_nominal(problem, scale, o);
+  const auto refit = problem.predict({}, k, true);
+  res.nominal_refit = {refit.gain, k.time_scale, k.shape, errors_of(data, refit.y, res.held_out)};
+  std::vector<double> sigmas;
+  for (size_t r = 0; r < data.size(); ++r) {
+    std::vector<double> e(data[r].y_um.size());
+    for (size_t i = 0; i < e.size(); ++i) e[i] = data[r].y_um[i] - refit.y[r][i];
+    sigmas.push_back(estimate_noise_sigma(e));
+  }
+  std::sort(sigmas.begin(), sigmas.end());
+  const double sigma = std::max(sigmas[sigmas.size() / 2], 1e-12);
+  res.noise_sigma_um = sigma;
+  // 3. The none test, and where the nominal model disagrees.
+  res.none_test = none_test(data, refit.y, sigma, o);
+  locate(res, data, sigma, std::sqrt(res.none_test.window_threshold), o);
+  res.fitted = res.baseline;
+  res.y_fitted_um = res.y_baseline_um;
+  const double refit_ms = res.nominal_refit.errors.rmse_um * res.nominal_refit.errors.rmse_um;
+  // A correlated residual below a tenth of the noise variance is not a material effect.
+  if (res.none_test.level_ok && (res.none_test.white || refit_ms <= 1.1 * sigma * sigma)) {
+    res.verdict = "none";
+    res.fitted = res.nominal_refit.errors;
+    res.y_fitted_um = refit.y;
+    res.explanation = std::string(physical_meaning(EffectKind::none)) + ": residual RMS " +
+                      fmt("%.3g", res.nominal_refit.errors.rmse_um) + " um after the nuisance-only refit against an "
+                      "estimated sensor noise of " + fmt("%.3g", sigma) + " um; no 1 s window exceeds its threshold (" +
+                      fmt("%.3g", res.none_test.window_threshold) + " x the noise variance at a " +
+                      fmt("%.2g", 100.0 * o.false_alarm_rate) + "% false-alarm rate, corrected for " +
+                      std::to_string(res.none_test.windows) + " windows)" +
+                      (res.none_test.white ? " and the residual is white" : "");
+    res.simulations = problem.simulations();
+    return res;
+  }
+  // 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict.
+  fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm());
+  for (auto& c : res.candidates)
+    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
+                    (c.fitted ? " (G time scale " + fmt("%.3g", c.time_scale) + ", gain " + fmt("%.3g", c.gain) +
+                                    "); validation RMSE " + fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) +
+                                    " -> " + fmt("%.3g", c.errors.rmse_validation_um) + " um"
+                              : " (coarse grid only: not among the leading candidates)");
+  decide(res, problem, data, scale, o);
+  res.simulations = problem.simulations();
   return res;
 }
 

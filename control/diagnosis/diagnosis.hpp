@@ -5,6 +5,7 @@
 /// exceeds the noise, fit candidate effects and choose by held-out error.
 
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,15 @@ struct Series {
 /// Tuning of the decision rules (defaults are what `pvcgel diagnose` uses).
 struct DiagnosisOptions {
   int io_delay_samples = 1;           ///< the model's I/O delay (samples), as `[model] io_delay_samples`
+  bool io_delay_declared = true;      ///< false: the model file is silent, io_delay_samples is estimated
+  int max_undeclared_delay_samples = 2;  ///< an undeclared I/O delay is searched over 0..this (hold conventions)
+  double gain_tolerance = 0.25;       ///< nominal refit: overall gain within [1/(1+tol), 1+tol]
+  double time_scale_tolerance = 0.25; ///< nominal refit: G's time constants scaled within [1/(1+tol), 1+tol]
+  double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
+  double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
+  double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
+  double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
+                                      ///< nuisance-only excess explain the data equally well
   double validation_fraction = 0.3;   ///< share of every block held out (its end)
   double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block (the whole
                                       ///< recording as one block when shorter than two blocks)
@@ -58,18 +68,55 @@ struct CandidateResult {
   bool fitted = false;       ///< refined by least squares (the leading candidates only)
   ModelErrors errors;
   double score = 0.0;        ///< penalised validation MSE (lower is better)
+  double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
   int simulations = 0;
   std::string explanation;
+};
+
+/// Timing, initial state and offset: nuisance parameters estimated from the data, never effects.
+struct Alignment {
+  double io_delay_samples = 0.0;        ///< estimated from the data (sub-sample when the fit curvature supports it)
+  std::optional<int> declared;          ///< what the model file says (empty: silent)
+  double used_samples = 0.0;            ///< the delay the analysis runs with
+  std::vector<double> offset_um;        ///< sensor offset per recording (measured minus model at rest)
+  std::vector<double> initial_V;        ///< the rest voltage each recording's simulation starts from
+  std::string note;                     ///< a plain sentence when estimate and file disagree
+};
+
+/// The bounded refit of the nominal model: overall gain, G's time scale and f's shape within
+/// tolerance. With a verdict naming effects, the parameters are those fitted jointly with them
+/// (what the augmented model runs); `errors` are always those of the nuisance-only refit.
+struct NominalRefit {
+  double gain = 1.0, time_scale = 1.0, poly_shape = 1.0;
+  ModelErrors errors;
+};
+
+/// The statistical `none` test on the residual of the nuisance-only refit.
+struct NoneTest {
+  double false_alarm_rate = 0.01;
+  int windows = 0;                 ///< windows the level test looked at (Bonferroni-corrected over these)
+  double worst_window_ratio = 0.0; ///< largest window mean-square residual / noise variance
+  double window_threshold = 0.0;   ///< its threshold at the corrected level
+  double whiteness_q = 0.0, whiteness_threshold = 0.0;  ///< largest Ljung-Box statistic over recordings and its threshold
+  bool level_ok = true, white = true;
 };
 
 /// The outcome.
 struct DiagnosisResult {
   std::string verdict;  ///< an effect name, "none" or "unexplained"
   EffectKind chosen = EffectKind::none;  ///< effect of the augmented model (none for "none"/"unexplained")
-  Effect effect;        ///< the chosen effect with its fitted parameters
+  Effect effect;        ///< the chosen (dominant) effect with its fitted parameters
+  std::vector<Effect> mixture;  ///< the effects of the augmented model, dominant first (empty for none/unexplained)
+  std::vector<double> contribution;  ///< per mixture element: held-out MSE it removes (um^2)
+  std::vector<std::string> ambiguous_with;  ///< effects that explain the held-out data as well as the verdict
+  std::string separating_experiment;        ///< what would tell them apart (when ambiguous_with is not empty)
+  Alignment alignment;
+  NominalRefit nominal_refit;
+  NoneTest none_test;
   std::string explanation;
   double noise_sigma_um = 0.0;
-  ModelErrors baseline, fitted;  ///< fitted == baseline unless an effect was chosen
+  ModelErrors baseline, fitted;  ///< baseline: the nominal model as declared (estimated delay if silent); fitted: the verdict's
+  ModelErrors aligned;           ///< the nominal model with the sensor offset and start state fitted
   std::vector<CandidateResult> candidates;  ///< ranked best first (fitted ones by score, then the rest by evidence)
   std::vector<MismatchWindow> mismatch;
   std::vector<std::vector<double>> y_baseline_um, y_fitted_um;  ///< per recording
@@ -96,9 +143,16 @@ void check_series(const Series& s, const HammersteinModel& model);
 /// Simulates `model` (with `effect`) from each recording's u, output error,
 /// from rest at the voltage whose steady state matches the mean of the first
 /// 10 measured samples (the recording's initial state; for an open-loop
-/// recording that starts at rest this is u[0]).
+/// recording that starts at rest this is u[0]). No nuisance fit: the raw model.
 std::vector<std::vector<double>> simulate(const HammersteinModel& model, const Effect& effect,
                                           const std::vector<Series>& data, int io_delay_samples);
+
+/// The model with G's time constants multiplied by `time_scale` and f's
+/// coefficients above the linear one by `poly_shape` (the bounded nominal refit).
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape);
+
+/// G with every time constant multiplied by `factor` (G(factor s)): same DC gain.
+TransferFunction time_scaled(const TransferFunction& G, double factor);
 
 /// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),
 /// ConfigError on a model that cannot be simulated (unstable G, non-monotone f

@@ -27,21 +27,35 @@ std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b
   return a;
 }
 
-/// The linear block with the effect's LTI part folded in (creep branch in
+/// Kelvin-Voigt creep branches: one at tau, or three (fraction / 3 each) spread
+/// log-uniformly over `spread` decades around tau (log-type creep).
+std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p) {
+  if (!(p[2] > 0.0)) return {{p[0], p[1]}};
+  const double half = std::pow(10.0, 0.5 * p[2]);
+  return {{p[0] / 3.0, p[1] / half}, {p[0] / 3.0, p[1]}, {p[0] / 3.0, p[1] * half}};
+}
+
+/// The linear block with the effects' LTI parts folded in (creep branches in
 /// parallel, structural mode in series), so one exact ZOH covers it.
-TransferFunction linear_block(const TransferFunction& G, const Effect& e) {
-  if (e.kind == EffectKind::creep) {
-    const std::vector<double> branch_den{e.p[1], 1.0};
-    auto num = add_polynomials(polynomial_multiply(G.num(), branch_den),
-                               polynomial_multiply({e.p[0] * G.dc_gain()}, G.den()));
-    return TransferFunction(num, polynomial_multiply(G.den(), branch_den));
+TransferFunction linear_block(const TransferFunction& G, bool creep, const std::array<double, kMaxEffectParams>& pc,
+                              bool mode, const std::array<double, kMaxEffectParams>& pm) {
+  std::vector<double> num = G.num(), den = G.den();
+  if (creep) {
+    for (const auto& [fraction, tau] : creep_branches(pc)) {
+      const std::vector<double> branch_den{tau, 1.0};
+      num = add_polynomials(polynomial_multiply(num, branch_den), polynomial_multiply({fraction * G.dc_gain()}, den));
+      den = polynomial_multiply(den, branch_den);
+    }
   }
-  if (e.kind == EffectKind::resonance) {
-    const double wn = 2.0 * std::numbers::pi * e.p[0];
-    return TransferFunction(polynomial_multiply(G.num(), {wn * wn}),
-                            polynomial_multiply(G.den(), {1.0, 2.0 * e.p[1] * wn, wn * wn}));
+  if (mode) {
+    const double wn = 2.0 * std::numbers::pi * pm[0], m = 1.0 - pm[2];  // participation
+    const std::vector<double> mode_den{1.0, 2.0 * pm[1] * wn, wn * wn};
+    // (1 - m) mode_den + m wn^2: the mode's zeros sit just above its poles when m is small.
+    const std::vector<double> mode_num{1.0 - m, (1.0 - m) * 2.0 * pm[1] * wn, wn * wn};
+    num = polynomial_multiply(num, mode_num);
+    den = polynomial_multiply(den, mode_den);
   }
-  return G;
+  return TransferFunction(num, den);
 }
 
 /// No response up to d, linear catch-up to u over the next w volts, then u.
@@ -60,36 +74,55 @@ std::optional<EffectKind> parse_effect_kind(std::string_view name) noexcept {
   return std::nullopt;
 }
 
-std::vector<ParameterSpec> parameter_specs(EffectKind kind, double Ts, double duration_s) {
+std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) {
+  const double Ts = d.sample_time_s, span = d.u_span_V(), u_abs = d.u_abs_V(), y_abs = std::max(d.y_abs_um, 1e-12);
+  const auto rel = [](double unit, std::initializer_list<double> fractions) {
+    std::vector<double> v;
+    for (double f : fractions) v.push_back(f * unit);
+    return v;
+  };
   switch (kind) {
     case EffectKind::none: return {};
     case EffectKind::hysteresis:
-      return {{"alpha", 0.0, 1.0, false, {0.005, 0.02, 0.06}}, {"threshold_scale_V", 0.5, 500.0, true, {3, 10, 30, 100}}};
+      // Play widths from sub-volt loops to loops of a large share of the recorded peak-to-peak.
+      return {{"alpha", 0.0, 1.0, false, {0.005, 0.02, 0.06, 0.3}},
+              {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, rel(span, {0.01, 0.03, 0.1, 0.3})}};
     case EffectKind::creep:
-      return {{"fraction", -0.3, 0.3, false, {0.003, -0.003}}, {"time_constant_s", 0.1, 300.0, true, {0.5, 2, 8, 30}}};
+      return {{"fraction", -0.5, 0.5, false, {0.003, -0.003, 0.03, -0.03}},
+              {"time_constant_s", std::min(20.0 * Ts, 0.1), std::max(10.0 * std::min(d.duration_s, 1e6), 1.0), true,
+               {0.5, 2, 8, 30}},
+              {"spread_decades", 0.0, 3.0, false, {0.0}, 0.0}};
     case EffectKind::dead_zone:
-      return {{"threshold_V", 0.0, 400.0, false, {3, 10, 30, 80, 150}}, {"catch_up_V", 0.5, 400.0, true, {5, 30, 100}}};
+      return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
+              {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1})}};
     case EffectKind::saturation:
-      return {{"knee_um", 0.0, 5000.0, false, {0, 100, 250}}, {"softness_um", 20.0, 1e6, true, {300, 1000, 4000}}};
+      return {{"knee_um", 0.0, 2.0 * y_abs, false, rel(y_abs, {0.0, 0.4, 0.8})},
+              {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(y_abs, {1.5, 5.0, 20.0})}};
     case EffectKind::delay: {
       const double n_max = static_cast<double>(kDelayLineSamples - 20);
-      return {{"extra_delay_s", 0.0, n_max * Ts, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
+      const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
+      return {{"extra_delay_s", 0.0, n_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
     }
     case EffectKind::asymmetric_dynamics:
       return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}}};
     case EffectKind::slew_limit:
-      return {{"slew_rate_V_per_s", 1.0, 1e7, true, {100, 200, 400, 800, 1600, 3200, 6400, 12800, 25600, 51200}}};
+      // From a slow amplifier to one that moves the whole recorded span in a tenth of a sample.
+      return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, rel(span / Ts, {0.002, 0.01, 0.05, 0.2})}};
     case EffectKind::resonance: {
       const double f_max = 0.4 / Ts;
       std::vector<double> starts;
-      for (double f : {3.0, 8.0, 16.0, 32.0, 64.0})
+      for (double f : {3.0, 8.0, 16.0, 32.0, 64.0, 150.0, 400.0, 1000.0})
         if (f < f_max) starts.push_back(f);
-      return {{"frequency_Hz", 0.5, f_max, true, starts}, {"damping_ratio", 0.005, 2.0, true, {0.05, 0.3}}};
+      return {{"frequency_Hz", std::min(0.5, 0.1 * f_max), f_max, true, starts},
+              {"damping_ratio", 0.005, 2.0, true, {0.05, 0.3}},
+              {"direct_fraction", 0.0, 1.0, false, {0.0, 0.9}, 0.0}};
     }
-    case EffectKind::drift:
-      return {{"offset_um", -100.0, 100.0, false, {0.0}},
-              {"rate_um_per_s", -20.0, 20.0, false, {-0.01, 0.01}},
-              {"onset_s", 0.0, std::max(duration_s, 0.0), false, {0.0, 0.25 * duration_s, 0.5 * duration_s}}};
+    case EffectKind::drift: {
+      const double dur = std::max(d.duration_s, 0.0);
+      return {{"offset_um", -y_abs, y_abs, false, {0.0}},
+              {"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, rel(y_abs, {-1e-4, 1e-4})},
+              {"onset_s", 0.0, dur, false, {0.0, 0.25 * dur, 0.5 * dur}}};
+    }
     case EffectKind::bias_dependent_dynamics:
       return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}}, {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}}};
   }
@@ -125,27 +158,54 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
 }
 
 void validate(const Effect& e, double Ts, const std::string& key) {
-  const auto specs = parameter_specs(e.kind, Ts, 1e300);
-  for (size_t i = 0; i < specs.size(); ++i) {
-    const auto& s = specs[i];
-    if (!std::isfinite(e.p[i]) || e.p[i] < s.lower || e.p[i] > s.upper)
-      throw ConfigError(key + "." + s.name, "must be in [" + std::to_string(s.lower) + ", " +
-                                                std::to_string(s.upper) + "], got " + std::to_string(e.p[i]));
+  const auto big = parameter_specs(e.kind, DataScale::unbounded(Ts)), small = parameter_specs(e.kind, DataScale::tiny(Ts));
+  for (size_t i = 0; i < big.size(); ++i) {
+    const double lower = std::min(big[i].lower, small[i].lower), upper = std::max(big[i].upper, small[i].upper);
+    if (!std::isfinite(e.p[i]) || e.p[i] < lower || e.p[i] > upper)
+      throw ConfigError(key + "." + big[i].name, "must be in [" + std::to_string(lower) + ", " + std::to_string(upper) +
+                                                     "], got " + std::to_string(e.p[i]));
   }
 }
 
-AugmentedPlant::AugmentedPlant(const HammersteinModel& model, int io_delay, double Ts, const Effect& e)
-    : e_(e), f_(model.f), Ts_(Ts), io_delay_(io_delay) {
+void validate_mixture(std::span<const Effect> effects, const std::string& key) {
+  int count = 0, time_scaling = 0;
+  std::array<bool, kNames.size()> seen{};
+  for (const auto& e : effects) {
+    if (e.kind == EffectKind::none) continue;
+    ++count;
+    if (seen[static_cast<size_t>(e.kind)])
+      throw ConfigError(key, "effect '" + std::string(to_string(e.kind)) + "' given twice");
+    seen[static_cast<size_t>(e.kind)] = true;
+    time_scaling += e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics;
+  }
+  if (count > kMaxEffects)
+    throw ConfigError(key, "at most " + std::to_string(kMaxEffects) + " effects run together, got " + std::to_string(count));
+  if (time_scaling > 1)
+    throw ConfigError(key, "asymmetric_dynamics and bias_dependent_dynamics both change G's time scale: give one");
+}
+
+AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, double Ts, std::span<const Effect> effects)
+    : f_(model.f), Ts_(Ts), io_delay_(io_delay) {
   if (!(Ts > 0.0)) throw ConfigError("sample_time_s", "must be positive");
-  if (io_delay < 0 || io_delay > 8) throw ConfigError("model.io_delay_samples", "must be 0..8 samples");
+  if (!(io_delay >= 0.0 && io_delay <= 8.0)) throw ConfigError("model.io_delay_samples", "must be 0..8 samples");
   if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
-  validate(e, Ts, "effect");
-  if (const auto turn = f_.first_turnover(1000.0)) x_sat_ = *turn;
-  const auto ss = realize(linear_block(model.G, e), "model.G");
+  validate_mixture(effects, "effect");
+  for (const auto& e : effects) {
+    if (e.kind == EffectKind::none) continue;
+    validate(e, Ts, "effect." + std::string(to_string(e.kind)));
+    on_[static_cast<size_t>(e.kind)] = true;
+    p_[static_cast<size_t>(e.kind)] = e.p;
+    if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
+  }
+  // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
+  if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
+  const auto ss = realize(linear_block(model.G, has(EffectKind::creep), p(EffectKind::creep), has(EffectKind::resonance),
+                                       p(EffectKind::resonance)),
+                          "model.G");
   if (ss.order() > kMaxOrder) throw ConfigError("model.G", "order above " + std::to_string(kMaxOrder));
-  if (e.kind == EffectKind::asymmetric_dynamics) {
-    scale_grid_ = {1.0, 1.0 + e.p[0]};
-  } else if (e.kind == EffectKind::bias_dependent_dynamics) {
+  if (time_scaling_ == EffectKind::asymmetric_dynamics) {
+    scale_grid_ = {1.0, 1.0 + p(EffectKind::asymmetric_dynamics)[0]};
+  } else if (time_scaling_ == EffectKind::bias_dependent_dynamics) {
     for (int i = 0; i <= 40; ++i) scale_grid_.push_back(std::exp(std::log(4.0) * (i - 20) / 20.0));
     scale_grid_[20] = 1.0;
   } else {
@@ -162,23 +222,27 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, int io_delay, doub
     D_ = d.D;
   }
   dc_gain_ = model.G.dc_gain();
-  if (e.kind == EffectKind::bias_dependent_dynamics) op_gain_ = e.p[1] > 0.0 ? 1.0 - std::exp(-Ts / e.p[1]) : 1.0;
+  const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
+  if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts / op_tau) : 1.0;
   y_ref_ = std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
   x_ = Vector::Zero(ss.order());
   reset_steady_state(0.0);
 }
 
 double AugmentedPlant::time_scale(double w) const noexcept {
-  if (e_.kind == EffectKind::asymmetric_dynamics) return dc_gain_ * w < y_lin_ ? 1.0 : 0.0;  // grid index
-  return std::clamp(1.0 + e_.p[0] * y_op_ / y_ref_, 0.25, 4.0);
+  if (time_scaling_ == EffectKind::asymmetric_dynamics) return dc_gain_ * w < y_lin_ ? 1.0 : 0.0;  // grid index
+  return std::clamp(1.0 + p(EffectKind::bias_dependent_dynamics)[0] * y_op_ / y_ref_, 0.25, 4.0);
 }
 
 double AugmentedPlant::output_stage(double y, long sample) const noexcept {
-  if (e_.kind == EffectKind::saturation) {
-    const double excess = y - e_.p[0];
-    if (excess > 0.0) y = e_.p[0] + excess / std::sqrt(1.0 + (excess / e_.p[1]) * (excess / e_.p[1]));
-  } else if (e_.kind == EffectKind::drift) {
-    y += e_.p[0] + e_.p[1] * std::max(static_cast<double>(sample) * Ts_ - e_.p[2], 0.0);
+  if (has(EffectKind::saturation)) {
+    const auto& q = p(EffectKind::saturation);
+    const double excess = std::abs(y) - q[0];
+    if (excess > 0.0) y = std::copysign(q[0] + excess / std::sqrt(1.0 + (excess / q[1]) * (excess / q[1])), y);
+  }
+  if (has(EffectKind::drift)) {
+    const auto& q = p(EffectKind::drift);
+    y += q[0] + q[1] * std::max(static_cast<double>(sample) * Ts_ - q[2], 0.0);
   }
   return y;
 }
@@ -190,57 +254,57 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   sample_ = 0;
   // u once through the static input stage, play operators virgin.
   double x = u;
-  if (e_.kind == EffectKind::dead_zone) x = dead_zone(u, e_.p[0], e_.p[1]);
+  if (has(EffectKind::dead_zone)) x = dead_zone(u, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
   plays_.fill(x);
   const double w = nonlinearity(x);
-  const size_t unit = e_.kind == EffectKind::bias_dependent_dynamics ? 20 : 0;
+  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;
   const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());
   x_ = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
   y_lin_ = y_op_ = C_.dot(x_) + D_ * w;
   y_ = output_stage(y_lin_, 0);
 }
 
+double AugmentedPlant::input_stage(double x) noexcept {
+  if (has(EffectKind::slew_limit)) {
+    // The amplifier ramps at the slew rate inside the sample: hold its mean over the sample.
+    const double cap = p(EffectKind::slew_limit)[0] * Ts_, e = x - slew_state_;
+    if (std::abs(e) <= cap) {
+      x -= 0.5 * e * std::abs(e) / cap;
+      slew_state_ += e;
+    } else {
+      x = slew_state_ + std::copysign(0.5 * cap, e);
+      slew_state_ += std::copysign(cap, e);
+    }
+  }
+  if (has(EffectKind::dead_zone)) x = dead_zone(x, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
+  if (has(EffectKind::hysteresis)) {
+    const auto& q = p(EffectKind::hysteresis);
+    double lag = 0.0;
+    for (int i = 0; i < kPlays; ++i) {
+      const double r = q[1] * kPlayQuantiles[static_cast<size_t>(i)];
+      auto& play = plays_[static_cast<size_t>(i)];
+      play = std::clamp(play, x - r, x + r);
+      lag += x - play;
+    }
+    x -= q[0] * lag / kPlays;
+  }
+  return x;
+}
+
 void AugmentedPlant::apply(double u) noexcept {
   delay_line_[static_cast<size_t>(head_)] = u;
   double delay = io_delay_;
-  if (e_.kind == EffectKind::delay) delay += e_.p[0] / Ts_;
+  if (has(EffectKind::delay)) delay += p(EffectKind::delay)[0] / Ts_;
   const int whole = static_cast<int>(delay);
   const double frac = delay - whole;
   const auto at = [&](int back) { return delay_line_[static_cast<size_t>((head_ - back + 2 * kDelayLine) % kDelayLine)]; };
-  double x = frac > 0.0 ? (1.0 - frac) * at(whole) + frac * at(whole + 1) : at(whole);
+  const double x = input_stage(frac > 0.0 ? (1.0 - frac) * at(whole) + frac * at(whole + 1) : at(whole));
   head_ = (head_ + 1) % kDelayLine;
 
-  switch (e_.kind) {
-    case EffectKind::slew_limit: {
-      // The amplifier ramps at the slew rate inside the sample: hold its mean over the sample.
-      const double cap = e_.p[0] * Ts_, e = x - slew_state_;
-      if (std::abs(e) <= cap) {
-        x -= 0.5 * e * std::abs(e) / cap;
-        slew_state_ += e;
-      } else {
-        x = slew_state_ + std::copysign(0.5 * cap, e);
-        slew_state_ += std::copysign(cap, e);
-      }
-      break;
-    }
-    case EffectKind::dead_zone: x = dead_zone(x, e_.p[0], e_.p[1]); break;
-    case EffectKind::hysteresis: {
-      double lag = 0.0;
-      for (int i = 0; i < kPlays; ++i) {
-        const double r = e_.p[1] * kPlayQuantiles[static_cast<size_t>(i)];
-        auto& p = plays_[static_cast<size_t>(i)];
-        p = std::clamp(p, x - r, x + r);
-        lag += x - p;
-      }
-      x -= e_.p[0] * lag / kPlays;
-      break;
-    }
-    default: break;
-  }
   const double w = nonlinearity(x);
   if (scale_grid_.size() == 1) {
     x_ = A_grid_[0] * x_ + B_grid_[0] * w;
-  } else if (e_.kind == EffectKind::asymmetric_dynamics) {
+  } else if (time_scaling_ == EffectKind::asymmetric_dynamics) {
     const auto i = static_cast<size_t>(time_scale(w));
     x_ = A_grid_[i] * x_ + B_grid_[i] * w;
   } else {

@@ -7,7 +7,10 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
+#include <limits>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -49,6 +52,30 @@ struct ParameterSpec {
   double upper = 0.0;
   bool log_scale = false;   ///< fitted in log space (positive scale parameters)
   std::vector<double> starts;  ///< coarse grid of starting values for the fit
+  /// Value when a file omits the key (NaN: the key is required). Parameters
+  /// added after the format was first written have one, so old files still load.
+  double default_value = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// The size of what was recorded: parameter bounds and starting points scale
+/// with it, so the same candidates work from millivolt amplifier inputs to a
+/// kilovolt, nanometre to millimetre strokes and 100 Hz to 10 kHz sampling.
+struct DataScale {
+  double sample_time_s = 1e-3;      ///< the longest sample time of the recordings
+  double sample_time_min_s = 0.0;   ///< the shortest (0: the same); the delay line's length counts these
+  double duration_s = 30.0;   ///< the longest recording
+  double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
+  double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
+  [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
+  [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
+  /// The largest and smallest scales: a file's parameters (nothing recorded to
+  /// scale by) are checked against the union of their bounds, physical limits only.
+  static DataScale unbounded(double sample_time_s) noexcept {
+    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12};
+  }
+  static DataScale tiny(double sample_time_s) noexcept {
+    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12};
+  }
 };
 
 /// Length of the plant's delay line (io delay plus the delay effect, in samples).
@@ -57,44 +84,59 @@ inline constexpr int kDelayLineSamples = 256;
 /// Maximum number of parameters of one effect.
 inline constexpr int kMaxEffectParams = 3;
 
+/// Maximum number of effects one plant runs at once (a mixture of two).
+inline constexpr int kMaxEffects = 2;
+
 /// An effect with its parameters (meaning per kind: see parameter_specs()).
 struct Effect {
   EffectKind kind = EffectKind::none;
   std::array<double, kMaxEffectParams> p{};
 };
 
-/// Parameters of `kind` with bounds and fit starts. `sample_time_s` and
-/// `duration_s` (the longest recording) set the bounds that depend on them.
-std::vector<ParameterSpec> parameter_specs(EffectKind kind, double sample_time_s, double duration_s);
+/// Parameters of `kind` with bounds and fit starts, scaled to the data.
+std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& scale);
 
 /// One sentence on what the effect is, in physical terms.
 std::string_view physical_meaning(EffectKind kind) noexcept;
 
-/// Checks parameters against their bounds. @throws ConfigError naming `key`.
+/// Checks parameters against their physical bounds. @throws ConfigError naming `key`.
 void validate(const Effect& effect, double sample_time_s, const std::string& key);
 
-/// The Hammerstein model with at most one added effect, stepped with the
+/// Checks that `effects` can run together in one plant (at most kMaxEffects,
+/// no kind twice, at most one effect that changes G's time scale).
+/// @throws ConfigError naming `key`.
+void validate_mixture(std::span<const Effect> effects, const std::string& key);
+
+/// The Hammerstein model with up to kMaxEffects added effects, stepped with the
 /// daemon's convention: output() is the displacement at the start of cycle k,
 /// apply(u) holds u over the cycle and advances one sample. The nominal model
 /// (EffectKind::none) is exactly SimulatedRig without sensor effects.
 /// Candidate forms (the generator in generator.hpp uses different ones):
 ///  - hysteresis: Prandtl-Ishlinskii play operators on the voltage,
 ///    x = u - alpha mean_i(u - play_{r_i}(u)), r_i = R i / 8;
-///  - creep: one Kelvin-Voigt branch fraction G(0) / (tau s + 1) in parallel with G;
+///  - creep: Kelvin-Voigt branches fraction G(0) / (tau s + 1) in parallel with G: one
+///    branch, or (spread_decades > 0) three with fraction / 3 each at tau 10^(-spread/2, 0, +spread/2),
+///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
 ///  - dead_zone: no response below threshold d, linear catch-up to u at 2 d;
-///  - saturation: y above a knee softens as knee + e / sqrt(1 + (e / Y)^2);
+///  - saturation: |y| above a knee softens as knee + e / sqrt(1 + (e / Y)^2) (both signs: bipolar strokes);
 ///  - delay: extra transport delay (fractional, linear interpolation);
 ///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing;
 ///  - slew_limit: the amplifier voltage changes at most S V/s;
-///  - resonance: a structural mode w_n^2 / (s^2 + 2 zeta w_n s + w_n^2) in series;
+///  - resonance: a structural mode in series, d + (1 - d) w_n^2 / (s^2 + 2 zeta w_n s + w_n^2),
+///    d the direct fraction (0: a full second-order low-pass; near 1: a mode with a small participation,
+///    a pole pair with a zero pair just above it);
 ///  - drift: offset + rate max(t - onset, 0), independent of the input;
 ///  - bias_dependent_dynamics: G runs (1 + beta y / y_ref) times slower,
 ///    y_ref = G(0) f(500 V).
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:
+  /// @param io_delay_samples  the I/O delay, whole or fractional samples (linear interpolation)
   /// @throws ConfigError if G is unstable or improper, or parameters are out of bounds.
-  AugmentedPlant(const HammersteinModel& model, int io_delay_samples, double sample_time_s, const Effect& effect);
+  AugmentedPlant(const HammersteinModel& model, double io_delay_samples, double sample_time_s,
+                 std::span<const Effect> effects);
+  AugmentedPlant(const HammersteinModel& model, double io_delay_samples, double sample_time_s, const Effect& effect)
+      : AugmentedPlant(model, io_delay_samples, sample_time_s, std::span<const Effect>(&effect, 1)) {}
 
   /// At rest under constant u (play operators virgin, time zero).
   void reset_steady_state(double u_V) noexcept;
@@ -111,22 +153,32 @@ class AugmentedPlant final {
   std::vector<double> simulate(const std::vector<double>& u_V, double initial_V);
 
  private:
-  static constexpr int kMaxOrder = 6;
+  static constexpr int kMaxOrder = 9;
+  static constexpr size_t kKinds = 11;
   static constexpr int kPlays = 8;
   static constexpr int kDelayLine = kDelayLineSamples;
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxOrder, 1>;
   using RowVector = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxOrder>;
 
-  [[nodiscard]] double nonlinearity(double x_V) const noexcept { return f_(std::min(x_V, x_sat_)); }
+  [[nodiscard]] double nonlinearity(double x_V) const noexcept { return f_(std::clamp(x_V, -x_sat_, x_sat_)); }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;
+  /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
+  double input_stage(double x_V) noexcept;
 
-  Effect e_;
+  [[nodiscard]] bool has(EffectKind k) const noexcept { return on_[static_cast<size_t>(k)]; }
+  [[nodiscard]] const std::array<double, kMaxEffectParams>& p(EffectKind k) const noexcept {
+    return p_[static_cast<size_t>(k)];
+  }
+
+  std::array<bool, kKinds> on_{};  ///< which effects run (at most kMaxEffects)
+  std::array<std::array<double, kMaxEffectParams>, kKinds> p_{};
+  EffectKind time_scaling_ = EffectKind::none;  ///< asymmetric or bias-dependent dynamics, if either
   OddPolynomial f_;
-  double x_sat_ = 1000.0;
+  double x_sat_ = 1e300;
   double Ts_ = 1e-3;
-  int io_delay_ = 1;
+  double io_delay_ = 1.0;
   // Linear block (G, G with a creep branch, or G times a mode), discretised for
   // a grid of time scales when the effect changes the time scale.
   std::vector<Matrix> A_grid_;

@@ -315,7 +315,7 @@ Run run_case(const HammersteinModel& model, const GeneratorOptions& o, const Tru
 
 /// RMS on the held-out segment and peak of (true output - nominal model from the recorded u).
 std::pair<double, double> effect_size(const HammersteinModel& model, const GeneratorOptions& o, const Run& run) {
-  AugmentedPlant nominal(model, o.io_delay_samples, o.sample_time_s, {});
+  AugmentedPlant nominal(model, o.io_delay_samples, o.sample_time_s, Effect{});
   const auto y0 = nominal.simulate(run.series.u_V, run.initial_V);
   const auto held_out = held_out_mask(y0.size(), o.sample_time_s);
   double sum = 0.0, peak = 0.0, n = 0.0;

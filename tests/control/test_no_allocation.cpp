@@ -79,17 +79,24 @@ TEST_P(NoAllocation, ControllerStepRigAndModeSwitchesDoNotAllocate) {
 }
 
 TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
-  // Every effect `pvcgel diagnose` can write into [sim.truth.effect].
+  // Every effect `pvcgel diagnose` can write into [[sim.truth.effect]], alone and in mixtures of two
+  // (every effect paired with its neighbour in this list, log-type creep and a partial mode included).
   const std::vector<diagnosis::Effect> effects{
-      {diagnosis::EffectKind::hysteresis, {0.02, 20.0}},  {diagnosis::EffectKind::creep, {0.01, 3.0}},
+      {diagnosis::EffectKind::hysteresis, {0.02, 20.0}},  {diagnosis::EffectKind::creep, {0.01, 3.0, 1.5}},
       {diagnosis::EffectKind::dead_zone, {20.0, 30.0}},   {diagnosis::EffectKind::saturation, {100.0, 500.0}},
       {diagnosis::EffectKind::delay, {2.5e-3}},           {diagnosis::EffectKind::asymmetric_dynamics, {0.3}},
-      {diagnosis::EffectKind::slew_limit, {2000.0}},      {diagnosis::EffectKind::resonance, {20.0, 0.1}},
+      {diagnosis::EffectKind::slew_limit, {2000.0}},      {diagnosis::EffectKind::resonance, {20.0, 0.1, 0.95}},
       {diagnosis::EffectKind::drift, {0.1, 0.01, 1.0}},   {diagnosis::EffectKind::bias_dependent_dynamics, {0.3, 0.5}}};
-  for (const auto& e : effects) {
+  std::vector<std::vector<diagnosis::Effect>> runs;
+  for (size_t i = 0; i < effects.size(); ++i) {
+    runs.push_back({effects[i]});
+    runs.push_back({effects[i], effects[(i + 1) % effects.size()]});
+  }
+  for (const auto& mix : runs) {
     SimRigConfig c = SimRigConfig{}.exactly(paper_model(3));
     c.noise_sigma_um = 0.05;
-    c.added_effect = e;
+    c.added_effects = mix;
+    const auto& e = mix.back();
     SimulatedRig rig(c);  // design time: may allocate
     double checksum = 0.0;
     const long before = g_allocations.load();
@@ -98,7 +105,7 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
       checksum += rig.measure();
       rig.apply(300.0 + 100.0 * std::sin(0.01 * static_cast<double>(k)));
     }
-    EXPECT_EQ(g_allocations.load() - before, 0) << diagnosis::to_string(e.kind);
+    EXPECT_EQ(g_allocations.load() - before, 0) << diagnosis::to_string(mix.front().kind) << " + " << diagnosis::to_string(e.kind);
     EXPECT_TRUE(std::isfinite(checksum));
   }
 }

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include "control/config_parser.hpp"
@@ -82,20 +83,31 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   // The augmented model: a daemon configuration whose sim rig reproduces the fitted prediction.
   ASSERT_EQ(o.augmented_model_path, (dir / "predaugmented_model.toml").string());
   const auto cfg = daemon::load_daemon_config(o.augmented_model_path);
-  ASSERT_EQ(cfg.rig.sim.added_effect.kind, EffectKind::creep);
-  for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(cfg.rig.sim.added_effect.p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
+  ASSERT_EQ(cfg.rig.sim.added_effects.size(), 1u);
+  ASSERT_EQ(cfg.rig.sim.added_effects[0].kind, EffectKind::creep);
+  for (size_t i = 0; i < 3; ++i)
+    EXPECT_NEAR(cfg.rig.sim.added_effects[0].p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
   auto sim = cfg.rig.sim;
   sim.noise_sigma_um = sim.quantization_um = 0.0;
   control::SimulatedRig rig(sim);
   const auto& s = c.recordings[0];
-  AugmentedPlant plant(control::paper_model(3), 1, s.sample_time_s, o.result.effect);
+  // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effect.
+  auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape);
+  auto poly = truth.f.coefficients();
+  for (double& c : poly) c *= o.result.nominal_refit.gain;
+  truth.f = control::OddPolynomial(poly);
+  ASSERT_EQ(cfg.rig.sim.io_delay_samples, std::lround(o.result.alignment.used_samples));
+  AugmentedPlant plant(truth, cfg.rig.sim.io_delay_samples, s.sample_time_s, o.result.effect);
   const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
+  const double offset_um = o.result.alignment.offset_um[0];
   rig.reset_steady_state(s.u_V[0]);
   double worst_rig = 0.0, worst_prediction = 0.0;
   for (size_t k = 0; k < s.u_V.size(); ++k) {
     worst_rig = std::max(worst_rig, std::abs(rig.true_displacement_um() - y_model[k]));
     // The diagnosis starts from the rest state the first samples imply: equal after its transient.
-    if (s.t_s[k] > 10.0) worst_prediction = std::max(worst_prediction, std::abs(y_model[k] - o.result.y_fitted_um[0][k]));
+    // The fitted prediction also carries the sensor offset.
+    if (s.t_s[k] > 10.0)
+      worst_prediction = std::max(worst_prediction, std::abs(y_model[k] + offset_um - o.result.y_fitted_um[0][k]));
     rig.apply(s.u_V[k]);
   }
   EXPECT_LT(worst_rig, 1e-5) << "the sim rig must run the diagnosed model (parameters written with 8 digits)";
@@ -161,10 +173,47 @@ TEST(DiagnoseCommand, BadInputNamesFileLineAndReason) {
             "model.toml:4: model.G_den: G(s) = (1) / (s - 2) is unstable (a pole in the closed right half plane): an "
             "output-error simulation of it diverges");
   EXPECT_EQ(error_of("[model]\npoly = [0.1, -0.001]\nG_num = [1.0]\nG_den = [1.0, 2.0]\n", uniform_recording(10000)),
-            "model.toml:2: model.poly: f is not monotone: f'(x) reaches 0 at x = 5.8 V, inside the recorded voltage range "
-            "(|u| up to 100.0 V)");
+            "model.toml:2: model.poly: f is not monotone: f'(x) reaches 0 at x = 5.774 V, inside the recorded voltage range "
+            "(|u| up to 100 V)");
   EXPECT_EQ(error_of("[model]\npoly = [0.1]\nG_num = [1.0]\n", uniform_recording(10000)),
             "model.toml: model.G_den: is required (in model.toml)");
+}
+
+TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsTablesKept) {
+  // Issue 11's crash: a static gain with a fast first-order G (no PID reaches the default phase
+  // margin), the user's [controller] table present, bipolar drive. Diagnosing needs no controller.
+  const auto dir = temp_dir("piezo");
+  const std::string model =
+      "[model]\npoly = [0.05]\nG_num = [2000.0]\nG_den = [1.0, 2000.0]\n\n[controller]\nmode = \"pid\"\nperiod_s = 0.001\n";
+  write(dir / "model.toml", model);
+  Series s;
+  s.sample_time_s = 1e-3;
+  control::HammersteinModel truth{control::OddPolynomial({0.05}), control::TransferFunction({2000.0}, {1.0, 2000.0})};
+  AugmentedPlant plant(truth, 1.0, s.sample_time_s, Effect{EffectKind::hysteresis, {0.15, 60.0}});
+  for (int k = 0; k < 20000; ++k) {
+    s.t_s.push_back(k * 1e-3);
+    s.u_V.push_back(150.0 * std::sin(2.0 * M_PI * 1.0 * k * 1e-3) + 40.0 * std::sin(2.0 * M_PI * 3.3 * k * 1e-3));
+  }
+  s.y_um = plant.simulate(s.u_V, 0.0);
+  std::mt19937_64 rng(4);
+  std::normal_distribution<double> noise(0.0, 0.02);
+  for (double& y : s.y_um) y += noise(rng);
+  write_recording(dir / "rec.csv", s);
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.json = (dir / "report.json").string();
+  a.quiet = true;
+  const auto o = run_diagnose(a);
+  EXPECT_EQ(o.result.verdict, "hysteresis") << o.summary;
+  const auto json = read(a.json);
+  for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
+                          "\"declared\": null", "\"offset_um\": "})
+    EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
+  // The augmented model keeps the user's [controller] table and the sim backend accepts it.
+  const auto text = read(o.augmented_model_path);
+  EXPECT_NE(text.find("mode = 'pid'"), std::string::npos) << text;
+  EXPECT_NO_THROW((void)control::parse_simulated_rig(toml::parse_file(o.augmented_model_path), o.augmented_model_path));
 }
 
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
@@ -177,6 +226,21 @@ TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   EXPECT_LE(r.false_alarms, 1);
   EXPECT_LE(r.worst_ratio, 0.5);
   EXPECT_EQ(r.out_of_spec, 0);
+}
+
+TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
+  // The first 12 cases of tests/data/independent (made by a separate Python generator,
+  // tests/data/independent/generate.py, from physical descriptions only; labels in labels.csv).
+  // The issue's targets (>= 95% single effects, <= 2% false alarms, >= 80% mixtures named) are NOT
+  // met yet: this asserts today's level so it cannot silently get worse; the report prints the targets.
+  std::ostringstream log;
+  const auto r = run_directory_suite(std::string(PVCGEL_SOURCE_DIR) + "/tests/data/independent", 2, log, 12);
+  std::cout << log.str() << format_directory_suite(r);
+  EXPECT_EQ(r.cases, 12);
+  EXPECT_EQ(r.failed, 0);
+  EXPECT_EQ(r.false_alarms, 0);
+  EXPECT_GE(r.single_correct, 5);
+  for (double ratio : r.ratios) EXPECT_LE(ratio, 0.5);
 }
 
 }  // namespace

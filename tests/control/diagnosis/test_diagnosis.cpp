@@ -143,3 +143,59 @@ TEST(Diagnose, NonMonotonePolynomialOverTheRecordedRangeIsAConfigError) {
 
 }  // namespace
 }  // namespace pvcgel::control::diagnosis
+
+namespace pvcgel::control::diagnosis {
+namespace {
+
+TEST(Alignment, AnUndeclaredDelayAStartNotAtRestAndAnOffsetAreNuisanceNotEffects) {
+  // Truth: 2 samples of I/O delay, a sensor offset of 0.4 um, and a start 100 V away from rest.
+  Series s = recording({}, 0.0);
+  AugmentedPlant truth(paper_model(3), 2, Ts, Effect{});
+  truth.reset_steady_state(s.u_V[0] - 100.0);
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> N(0.0, 0.05);
+  for (size_t k = 0; k < s.u_V.size(); ++k) {
+    s.y_um[k] = truth.output() + 0.4 + N(rng);
+    truth.apply(s.u_V[k]);
+  }
+  DiagnosisOptions o;
+  o.io_delay_declared = false;
+  const auto r = diagnose(paper_model(3), {s}, o);
+  EXPECT_EQ(r.verdict, "none") << r.explanation;
+  EXPECT_NEAR(r.alignment.io_delay_samples, 2.0, 0.1);
+  EXPECT_FALSE(r.alignment.declared);
+  EXPECT_NEAR(r.alignment.offset_um[0], 0.4, 0.05);
+  // Declared as 1: the file is contradicted, and the extra sample is a delay effect.
+  const auto d = diagnose(paper_model(3), {s});
+  EXPECT_NE(d.alignment.note.find("declares io_delay_samples = 1"), std::string::npos) << d.alignment.note;
+  EXPECT_EQ(d.verdict, "delay") << d.explanation;
+}
+
+TEST(Diagnose, NamesBothEffectsOfAMixtureDominantFirst) {
+  const std::vector<Effect> both{{EffectKind::hysteresis, {0.04, 20.0}}, {EffectKind::creep, {0.006, 3.0}}};
+  Series s = recording({}, 0.0, 3, 30.0);
+  AugmentedPlant p(paper_model(3), 1, Ts, std::span<const Effect>(both));
+  s.y_um = p.simulate(s.u_V, s.u_V[0]);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 0.05);
+  for (double& y : s.y_um) y += N(rng);
+  const auto r = diagnose(paper_model(3), {s});
+  ASSERT_EQ(r.mixture.size(), 2u) << r.explanation;
+  EXPECT_EQ(r.verdict, "hysteresis") << r.explanation;
+  EXPECT_EQ(r.mixture[1].kind, EffectKind::creep);
+  EXPECT_GE(r.contribution[0], r.contribution[1]);
+}
+
+TEST(NoneTest, FalseAlarmRateOnNominalDataIsWithinItsStatedLevel) {
+  // 20 noise-only recordings (noise seeds): at a 1% level, more than 2 alarms would be a 1-in-1000 event.
+  int alarms = 0;
+  for (std::uint64_t seed = 100; seed < 120; ++seed) {
+    const auto r = diagnose(paper_model(3), {recording({}, 0.05, seed, 12.0)});
+    alarms += r.verdict != "none";
+    EXPECT_GT(r.none_test.windows, 10);
+  }
+  EXPECT_LE(alarms, 2);
+}
+
+}  // namespace
+}  // namespace pvcgel::control::diagnosis

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "control/config_error.hpp"
+#include "control/diagnosis/effect_config.hpp"
 #include "control/simulated_rig.hpp"
 
 namespace pvcgel::control::diagnosis {
@@ -159,13 +160,96 @@ TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
     AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::dead_zone, {-3.0, 10.0}});
     FAIL() << "no error";
   } catch (const ConfigError& e) {
-    EXPECT_EQ(e.key(), "effect.threshold_V");
+    EXPECT_EQ(e.key(), "effect.dead_zone.threshold_V");
   }
 }
 
 TEST(Effect, NamesRoundTrip) {
   for (auto k : kCandidateEffects) EXPECT_EQ(parse_effect_kind(to_string(k)), k);
   EXPECT_FALSE(parse_effect_kind("gravity"));
+}
+
+}  // namespace
+}  // namespace pvcgel::control::diagnosis
+
+namespace pvcgel::control::diagnosis {
+namespace {
+
+std::vector<Effect> parse_effects(const std::string& text) {
+  const auto root = toml::parse(text);
+  TableReader top(&root, "");
+  auto sim = top.table("sim");
+  auto truth = sim.table("truth");
+  return read_effect_tables(truth, "effect", 1e-3);
+}
+
+std::string parse_error(const std::string& text) {
+  try {
+    (void)parse_effects(text);
+  } catch (const ConfigError& e) {
+    return e.key();
+  }
+  return "no error";
+}
+
+TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
+  const auto two = parse_effects(
+      "[[sim.truth.effect]]\nname = \"hysteresis\"\nalpha = 0.05\nthreshold_scale_V = 20.0\n"
+      "[[sim.truth.effect]]\nname = \"creep\"\nfraction = 0.02\ntime_constant_s = 5.0\n");
+  ASSERT_EQ(two.size(), 2u);
+  EXPECT_EQ(two[0].kind, EffectKind::hysteresis);
+  EXPECT_EQ(two[1].kind, EffectKind::creep);
+  EXPECT_DOUBLE_EQ(two[1].p[1], 5.0);
+  EXPECT_DOUBLE_EQ(two[1].p[2], 0.0);  // spread_decades: optional, one branch
+  const auto one = parse_effects("[sim.truth.effect]\nname = \"resonance\"\nfrequency_Hz = 40.0\ndamping_ratio = 0.1\n");
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_DOUBLE_EQ(one[0].p[2], 0.0);  // direct_fraction: optional, a full mode
+  EXPECT_TRUE(parse_effects("[sim.truth]\n").empty());
+}
+
+TEST(EffectTables, ErrorsNameTheElementAndKey) {
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"creep\"\nfraction = 0.02\ntime_constant_s = 5.0\n"
+                        "[[sim.truth.effect]]\nname = \"gravity\"\n"),
+            "sim.truth.effect[1].name");
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"creep\"\nfraction = 0.02\n"), "sim.truth.effect[0].time_constant_s");
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"creep\"\nfraction = 0.02\ntime_constant_s = 5.0\ncolour = 1\n"),
+            "sim.truth.effect[0].colour");
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"drift\"\noffset_um = 0\nrate_um_per_s = 0\nonset_s = 0\n"
+                        "[[sim.truth.effect]]\nname = \"drift\"\noffset_um = 0\nrate_um_per_s = 0\nonset_s = 0\n"),
+            "sim.truth.effect");
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"asymmetric_dynamics\"\nrelaxation_slowdown = 0.2\n"
+                        "[[sim.truth.effect]]\nname = \"bias_dependent_dynamics\"\nbeta = 0.2\noperating_point_time_constant_s = 1\n"),
+            "sim.truth.effect");
+}
+
+TEST(AugmentedPlant, AMixtureIsBothEffects) {
+  // Hysteresis (input side) and creep (a parallel branch) compose: the mixture differs from each alone.
+  const auto u = voltage(20000);
+  const Effect h{EffectKind::hysteresis, {0.05, 20.0}}, c{EffectKind::creep, {0.02, 2.0}};
+  const std::vector<Effect> both{h, c};
+  AugmentedPlant p(paper_model(3), 1, Ts, std::span<const Effect>(both));
+  const auto y = p.simulate(u, u[0]), yh = run(h, u, u[0]), yc = run(c, u, u[0]), y0 = run({}, u, u[0]);
+  double worst_sum = 0.0, diff_h = 0.0, diff_c = 0.0;
+  for (size_t k = 0; k < u.size(); ++k) {
+    // To first order the two deviations add.
+    worst_sum = std::max(worst_sum, std::abs((y[k] - y0[k]) - (yh[k] - y0[k]) - (yc[k] - y0[k])));
+    diff_h = std::max(diff_h, std::abs(y[k] - yh[k]));
+    diff_c = std::max(diff_c, std::abs(y[k] - yc[k]));
+  }
+  EXPECT_GT(diff_h, 0.3);
+  EXPECT_GT(diff_c, 0.3);
+  EXPECT_LT(worst_sum, 0.1 * std::min(diff_h, diff_c));
+}
+
+TEST(AugmentedPlant, APartialModeKeepsMostOfTheDirectResponse) {
+  const auto u = steps(20000, 100.0, 300.0);
+  const auto full = run({EffectKind::resonance, {5.0, 0.05, 0.0}}, u, 100.0);
+  const auto partial = run({EffectKind::resonance, {5.0, 0.05, 0.95}}, u, 100.0);
+  const auto y0 = run({}, u, 100.0);
+  double ring_full = 0.0, ring_partial = 0.0;
+  for (size_t k = 0; k < u.size(); ++k)
+    ring_full = std::max(ring_full, std::abs(full[k] - y0[k])), ring_partial = std::max(ring_partial, std::abs(partial[k] - y0[k]));
+  EXPECT_NEAR(ring_partial / ring_full, 0.05, 0.01);  // 5% participation
 }
 
 }  // namespace
