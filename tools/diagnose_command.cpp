@@ -14,8 +14,10 @@
 
 #include "control/config_error.hpp"
 #include "control/config_parser.hpp"
+#include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/recording.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -23,13 +25,6 @@ namespace fs = std::filesystem;
 using namespace control::diagnosis;
 
 namespace {
-
-std::string num(double v, const char* f = "%.6g") {
-  if (!std::isfinite(v)) return "null";
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
 
 std::string quoted(const std::string& s) {
   std::string o = "\"";
@@ -42,20 +37,6 @@ std::string quoted(const std::string& s) {
   return o + "\"";
 }
 
-std::string toml_array(const std::vector<double>& v) {
-  std::string s = "[";
-  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + num(v[i], "%.10g");
-  return s + "]";
-}
-
-void write_text(const fs::path& p, const std::string& text) {
-  if (p.has_parent_path()) fs::create_directories(p.parent_path());
-  std::ofstream f(p);
-  if (!f) throw std::runtime_error("cannot write " + p.string());
-  f << text;
-  if (!f.flush()) throw std::runtime_error("write failed: " + p.string());
-}
-
 /// Line of a key in the parsed file (0 when unknown).
 long line_of(const toml::table& root, const std::string& table, const std::string& key) {
   if (const auto* t = root[table].as_table())
@@ -65,14 +46,12 @@ long line_of(const toml::table& root, const std::string& table, const std::strin
 
 std::string where(const std::string& path, long line) { return line > 0 ? path + ":" + std::to_string(line) : path; }
 
-double cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
-
 /// Every `step`-th sample, so plot files stay small.
 size_t stride(size_t n) { return std::max<size_t>(1, n / 6000); }
 
 std::string effect_params_json(const CandidateResult& c) {
   std::string s = "{";
-  for (size_t i = 0; i < c.specs.size(); ++i) s += (i ? ", " : "") + quoted(c.specs[i].name) + ": " + num(c.effect.p[i]);
+  for (size_t i = 0; i < c.specs.size(); ++i) s += (i ? ", " : "") + quoted(c.specs[i].name) + ": " + number_or_null(c.effect.p[i]);
   return s + "}";
 }
 
@@ -110,12 +89,12 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
         << s.y_um[k] - r.y_baseline_um[i][k] << ' ' << s.y_um[k] - r.y_fitted_um[i][k] << ' ' << s.u_V[k] << ' ' << du
         << ' ' << rising << ' ' << static_cast<int>(r.held_out[i][k]) << '\n';
     }
-    write_text(dir / ("rec" + std::to_string(i) + ".dat"), d.str());
+    write_text_file(dir / ("rec" + std::to_string(i) + ".dat"), d.str());
   }
   const auto dat = [&](size_t i) { return "'" + (dir / ("rec" + std::to_string(i) + ".dat")).string() + "'"; };
   const std::string rows = std::to_string(R);
   std::ostringstream gp;
-  gp << "set terminal pngcairo size 1200," << 360 * R << " font ',10'\nset grid\nset key outside right\n";
+  gp << "set terminal pngcairo noenhanced size 1200," << 360 * R << " font ',10'\nset grid\nset key outside right\n";
   gp << "set output '" << (dir / "measured_vs_simulated.png").string() << "'\nset multiplot layout " << rows
      << ",1 title 'Measured vs simulated from the recorded u (output error)'\nset xlabel 't (s)'\nset ylabel 'y (um)'\n";
   for (size_t i = 0; i < R; ++i)
@@ -144,7 +123,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   if (axis == RegimeAxis::displacement) col = "3", xlabel = "simulated displacement (um)";
   if (axis == RegimeAxis::time) col = "1", xlabel = "t (s)";
   if (axis == RegimeAxis::voltage_rate) col = "8", xlabel = "du/dt (V/s)";
-  gp << "set output '" << (dir / "residual_vs_regime.png").string() << "'\nset terminal pngcairo size 1000,600\n"
+  gp << "set output '" << (dir / "residual_vs_regime.png").string() << "'\nset terminal pngcairo noenhanced size 1000,600\n"
      << "set title 'Nominal-model residual vs the regime variable, split by direction of the voltage'\nset xlabel '" << xlabel
      << "'\nset ylabel 'y minus model (um)'\nplot ";
   for (size_t i = 0; i < R; ++i)
@@ -152,32 +131,32 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
        << "', " << dat(i) << " u " << col << ":($9==0?$5:1/0) w p pt 7 ps 0.3 lc rgb '#1f77b4' t '" << (i ? "" : "u falling") << "'";
   gp << "\n";
   // Before / after on the held-out segments.
-  gp << "set output '" << (dir / "validation.png").string() << "'\nset terminal pngcairo size 1200," << 360 * R
+  gp << "set output '" << (dir / "validation.png").string() << "'\nset terminal pngcairo noenhanced size 1200," << 360 * R
      << " font ',10'\nset multiplot layout " << rows
      << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
   for (size_t i = 0; i < R; ++i)
     gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
        << " u 1:($10==1?$5:1/0) w l lc rgb '#1f77b4' t 'before', '' u 1:($10==1?$6:1/0) w l lc rgb '#d62728' t 'after'\n";
   gp << "unset multiplot\n";
-  write_text(dir / "diagnose.gp", gp.str());
+  write_text_file(dir / "diagnose.gp", gp.str());
   run_gnuplot(dir / "diagnose.gp");
 
   std::ostringstream md;
   md << "# pvcgel diagnose\n\n**Verdict: " << r.verdict << "**\n\n" << r.explanation << "\n\n";
   md << "| | RMSE all (um) | fit segment (um) | held-out (um) |\n|---|---|---|---|\n";
-  md << "| nominal model | " << num(r.baseline.rmse_um, "%.4f") << " | " << num(r.baseline.rmse_fit_um, "%.4f") << " | "
-     << num(r.baseline.rmse_validation_um, "%.4f") << " |\n";
-  md << "| augmented model | " << num(r.fitted.rmse_um, "%.4f") << " | " << num(r.fitted.rmse_fit_um, "%.4f") << " | "
-     << num(r.fitted.rmse_validation_um, "%.4f") << " |\n\nSensor noise estimated from the data: "
-     << num(r.noise_sigma_um, "%.4f") << " um.\n\n";
+  md << "| nominal model | " << number_or_null(r.baseline.rmse_um, "%.4f") << " | " << number_or_null(r.baseline.rmse_fit_um, "%.4f") << " | "
+     << number_or_null(r.baseline.rmse_validation_um, "%.4f") << " |\n";
+  md << "| augmented model | " << number_or_null(r.fitted.rmse_um, "%.4f") << " | " << number_or_null(r.fitted.rmse_fit_um, "%.4f") << " | "
+     << number_or_null(r.fitted.rmse_validation_um, "%.4f") << " |\n\nSensor noise estimated from the data: "
+     << number_or_null(r.noise_sigma_um, "%.4f") << " um.\n\n";
   if (!model_path.empty()) md << "Augmented model (daemon-loadable): `" << model_path << "`\n\n";
   md << "## Where the model disagrees\n\n";
   if (r.mismatch.empty()) md << "No window exceeds the noise.\n\n";
   else {
     md << "| recording | from (s) | to (s) | RMS (um) | regime |\n|---|---|---|---|---|\n";
     for (const auto& w : r.mismatch)
-      md << "| " << fs::path(names[static_cast<size_t>(w.recording)]).filename().string() << " | " << num(w.t_start_s, "%.2f")
-         << " | " << num(w.t_end_s, "%.2f") << " | " << num(w.rms_um, "%.3f") << " | " << w.regime << " |\n";
+      md << "| " << fs::path(names[static_cast<size_t>(w.recording)]).filename().string() << " | " << number_or_null(w.t_start_s, "%.2f")
+         << " | " << number_or_null(w.t_end_s, "%.2f") << " | " << number_or_null(w.rms_um, "%.3f") << " | " << w.regime << " |\n";
     md << "\n";
   }
   md << "![measured vs simulated](measured_vs_simulated.png)\n\n![residual](residual.png)\n\n"
@@ -185,38 +164,33 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   md << "| effect | parameters | evidence R2 | fit RMSE (um) | held-out RMSE (um) |\n|---|---|---|---|---|\n";
   for (const auto& c : r.candidates) {
     std::string p;
-    for (size_t i = 0; i < c.specs.size(); ++i) p += (i ? ", " : "") + c.specs[i].name + " = " + num(c.effect.p[i], "%.4g");
-    md << "| " << to_string(c.effect.kind) << " | " << p << " | " << num(c.evidence_r2, "%.3f") << " | "
-       << (c.fitted ? num(c.errors.rmse_fit_um, "%.4f") : "-") << " | " << (c.fitted ? num(c.errors.rmse_validation_um, "%.4f") : "-")
+    for (size_t i = 0; i < c.specs.size(); ++i) p += (i ? ", " : "") + c.specs[i].name + " = " + number_or_null(c.effect.p[i], "%.4g");
+    md << "| " << to_string(c.effect.kind) << " | " << p << " | " << number_or_null(c.evidence_r2, "%.3f") << " | "
+       << (c.fitted ? number_or_null(c.errors.rmse_fit_um, "%.4f") : "-") << " | " << (c.fitted ? number_or_null(c.errors.rmse_validation_um, "%.4f") : "-")
        << " |\n";
   }
   md << "\n## Before and after on held-out data\n\n![validation](validation.png)\n\n```\n" << summary << "```\n";
-  write_text(dir / "report.md", md.str());
+  write_text_file(dir / "report.md", md.str());
 }
 
 }  // namespace
 
 LoadedModel load_model(const std::string& path) {
-  toml::table root;
-  try {
-    root = toml::parse_file(path);
-  } catch (const toml::parse_error& e) {
-    throw std::runtime_error(where(path, static_cast<long>(e.source().begin.line)) + ": not valid TOML: " +
-                             std::string(e.description()));
-  }
+  // A bad model file is a configuration error (exit 2), as in every subcommand.
+  const toml::table root = daemon::read_config_file(path, "--model").root;
   LoadedModel m;
   try {
     m.model = control::parse_model(root, path);
   } catch (const control::ConfigError& e) {
     const auto dot = e.key().find('.');
     const std::string key = dot == std::string::npos ? "" : e.key().substr(dot + 1, e.key().find_first_of(".[", dot + 1) - dot - 1);
-    throw std::runtime_error(where(path, line_of(root, "model", key)) + ": " + e.what());
+    throw control::ConfigError(where(path, line_of(root, "model", key)), e.what());
   }
   if (const auto* t = root["model"].as_table(); t && t->contains("io_delay_samples")) {
     const auto v = t->get("io_delay_samples")->value_exact<int64_t>();
     if (!v || *v < 0 || *v > 8)
-      throw std::runtime_error(where(path, line_of(root, "model", "io_delay_samples")) +
-                               ": model.io_delay_samples: must be an integer 0..8");
+      throw control::ConfigError(where(path, line_of(root, "model", "io_delay_samples")),
+                                 "model.io_delay_samples: must be an integer 0..8");
     m.io_delay_samples = static_cast<int>(*v);
     m.io_delay_declared = true;
   }
@@ -229,11 +203,12 @@ LoadedModel load_model(const std::string& path) {
     m.other_tables = o.str();
   }
   if (!m.model.G.is_stable())
-    throw std::runtime_error(where(path, line_of(root, "model", "G_den")) + ": model.G_den: G(s) = " +
-                             m.model.G.to_string() + " is unstable (a pole in the closed right half plane): "
-                             "an output-error simulation of it diverges");
+    throw control::ConfigError(where(path, line_of(root, "model", "G_den")),
+                               "model.G_den: G(s) = " + m.model.G.to_string() +
+                                   " is unstable (a pole in the closed right half plane): an output-error "
+                                   "simulation of it diverges");
   if (m.model.G.relative_degree() < 0)
-    throw std::runtime_error(where(path, line_of(root, "model", "G_num")) + ": model.G_num: G(s) is improper");
+    throw control::ConfigError(where(path, line_of(root, "model", "G_num")), "model.G_num: G(s) is improper");
   return m;
 }
 
@@ -252,14 +227,14 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
   const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
   s << "#\n# [model] is the nominal model the recordings were compared with (what the controller uses).\n"
-    << "# [sim.truth] is that model with the nuisance refit (overall gain " << num(r.nominal_refit.gain, "%.4g")
-    << ", G's time constants x " << num(r.nominal_refit.time_scale, "%.4g") << ", f's nonlinear coefficients x "
-    << num(r.nominal_refit.poly_shape, "%.4g") << ") plus the diagnosed effects\n"
+    << "# [sim.truth] is that model with the nuisance refit (overall gain " << number_or_null(r.nominal_refit.gain, "%.4g")
+    << ", G's time constants x " << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f's nonlinear coefficients x "
+    << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ") plus the diagnosed effects\n"
     << "# ([[sim.truth.effect]], dominant first), so\n"
     << "#   pvcgeld --config THIS_FILE   (sim backend)\n"
     << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n";
   if (!lm.io_delay_declared)
-    s << "# io_delay_samples: not declared in the model file; estimated " << num(r.alignment.io_delay_samples, "%.3g")
+    s << "# io_delay_samples: not declared in the model file; estimated " << number_or_null(r.alignment.io_delay_samples, "%.3g")
       << " samples from the data (rounded here).\n";
   if (!lm.other_tables.empty()) s << "# The model file's other tables follow [model] unchanged.\n";
   s << "\n";
@@ -270,10 +245,10 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   const auto turn = m.f.first_turnover(1000.0);
   if (turn && lm.other_tables.find("[controller]") == std::string::npos) {
     // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
-    s << "# f turns over at " << num(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
-      << num(std::floor(0.99 * *turn), "%.0f") << "\n\n";
+    s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
+      << number_or_null(std::floor(0.99 * *turn), "%.0f") << "\n\n";
   }
-  s << "[sim]\nio_delay_samples = " << io << "\nnoise_sigma_um = " << num(r.noise_sigma_um, "%.4g")
+  s << "[sim]\nio_delay_samples = " << io << "\nnoise_sigma_um = " << number_or_null(r.noise_sigma_um, "%.4g")
     << "\nquantization_um = 0.0\n\n"
     << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effects replace them.\n"
     << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
@@ -287,7 +262,7 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   for (const auto& e : r.mixture) {
     const auto specs = parameter_specs(e.kind, DataScale::unbounded(1e-3));
     s << "\n# " << physical_meaning(e.kind) << ".\n[[sim.truth.effect]]\nname = " << quoted(std::string(to_string(e.kind))) << "\n";
-    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << num(e.p[i], "%.8g") << "\n";
+    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << number_or_null(e.p[i], "%.8g") << "\n";
   }
   return s.str();
 }
@@ -301,30 +276,30 @@ std::string extension_json(const DiagnosisResult& r) {
     c.effect = r.mixture[i];
     c.specs = parameter_specs(c.effect.kind, DataScale::unbounded(1e-3));
     j << (i ? ", " : "") << "{\"name\": " << quoted(std::string(to_string(c.effect.kind))) << ", \"params\": " << effect_params_json(c)
-      << ", \"heldout_mse_removed_um2\": " << num(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";
+      << ", \"heldout_mse_removed_um2\": " << number_or_null(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";
   }
   j << "],\n  \"ambiguous_with\": [";
   for (size_t i = 0; i < r.ambiguous_with.size(); ++i) j << (i ? ", " : "") << quoted(r.ambiguous_with[i]);
   j << "],\n";
   if (!r.ambiguous_with.empty()) j << "  \"separating_experiment\": " << quoted(r.separating_experiment) << ",\n";
   const auto& a = r.alignment;
-  j << "  \"alignment\": {\"io_delay_samples\": " << num(a.io_delay_samples, "%.3g") << ", \"declared\": "
-    << (a.declared ? std::to_string(*a.declared) : "null") << ", \"used_samples\": " << num(a.used_samples, "%.3g")
-    << ", \"offset_um\": " << num(a.offset_um.empty() ? NAN : a.offset_um.front()) << ", \"offset_per_recording_um\": [";
-  for (size_t i = 0; i < a.offset_um.size(); ++i) j << (i ? ", " : "") << num(a.offset_um[i]);
+  j << "  \"alignment\": {\"io_delay_samples\": " << number_or_null(a.io_delay_samples, "%.3g") << ", \"declared\": "
+    << (a.declared ? std::to_string(*a.declared) : "null") << ", \"used_samples\": " << number_or_null(a.used_samples, "%.3g")
+    << ", \"offset_um\": " << number_or_null(a.offset_um.empty() ? NAN : a.offset_um.front()) << ", \"offset_per_recording_um\": [";
+  for (size_t i = 0; i < a.offset_um.size(); ++i) j << (i ? ", " : "") << number_or_null(a.offset_um[i]);
   j << "], \"initial_V\": [";
-  for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << num(a.initial_V[i]);
+  for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << number_or_null(a.initial_V[i]);
   j << "], \"note\": " << quoted(a.note) << "},\n";
   const auto& n = r.nominal_refit;
-  j << "  \"baseline_aligned\": {\"rmse_um\": " << num(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << num(r.aligned.rmse_fit_um)
-    << ", \"rmse_validation_um\": " << num(r.aligned.rmse_validation_um) << "},\n";
-  j << "  \"nominal_refit\": {\"gain\": " << num(n.gain) << ", \"time_scale\": " << num(n.time_scale)
-    << ", \"poly_shape\": " << num(n.poly_shape)
-    << ", \"rmse_um\": " << num(n.errors.rmse_um) << ", \"rmse_validation_um\": " << num(n.errors.rmse_validation_um) << "},\n";
+  j << "  \"baseline_aligned\": {\"rmse_um\": " << number_or_null(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.aligned.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << number_or_null(r.aligned.rmse_validation_um) << "},\n";
+  j << "  \"nominal_refit\": {\"gain\": " << number_or_null(n.gain) << ", \"time_scale\": " << number_or_null(n.time_scale)
+    << ", \"poly_shape\": " << number_or_null(n.poly_shape)
+    << ", \"rmse_um\": " << number_or_null(n.errors.rmse_um) << ", \"rmse_validation_um\": " << number_or_null(n.errors.rmse_validation_um) << "},\n";
   const auto& t = r.none_test;
-  j << "  \"none_test\": {\"false_alarm_rate\": " << num(t.false_alarm_rate) << ", \"windows\": " << t.windows
-    << ", \"worst_window_ratio\": " << num(t.worst_window_ratio) << ", \"window_threshold\": " << num(t.window_threshold)
-    << ", \"ljung_box_q\": " << num(t.whiteness_q) << ", \"ljung_box_threshold\": " << num(t.whiteness_threshold)
+  j << "  \"none_test\": {\"false_alarm_rate\": " << number_or_null(t.false_alarm_rate) << ", \"windows\": " << t.windows
+    << ", \"worst_window_ratio\": " << number_or_null(t.worst_window_ratio) << ", \"window_threshold\": " << number_or_null(t.window_threshold)
+    << ", \"ljung_box_q\": " << number_or_null(t.whiteness_q) << ", \"ljung_box_threshold\": " << number_or_null(t.whiteness_threshold)
     << ", \"level_ok\": " << (t.level_ok ? "true" : "false") << ", \"white\": " << (t.white ? "true" : "false") << "}";
   return j.str();
 }
@@ -333,38 +308,38 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
                            const std::vector<long>& skipped, double cpu) {
   std::ostringstream j;
   j << "{\n  \"verdict\": " << quoted(r.verdict) << ",\n  \"explanation\": " << quoted(r.explanation)
-    << ",\n  \"noise_sigma_um\": " << num(r.noise_sigma_um) << ",\n  \"effects\": [";
+    << ",\n  \"noise_sigma_um\": " << number_or_null(r.noise_sigma_um) << ",\n  \"effects\": [";
   bool first = true;
   for (const auto& c : r.candidates) {
     if (!c.fitted) continue;
     const double improvement = r.baseline.rmse_validation_um > 0 ? 1.0 - c.errors.rmse_validation_um / r.baseline.rmse_validation_um : 0.0;
     j << (first ? "\n" : ",\n") << "    {\"name\": " << quoted(std::string(to_string(c.effect.kind)))
       << ", \"params\": " << effect_params_json(c) << ", \"explanation\": " << quoted(c.explanation)
-      << ", \"rmse_fit_um\": " << num(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << num(c.errors.rmse_validation_um)
-      << ", \"evidence\": {\"coarse_grid_r2\": " << num(c.evidence_r2) << ", \"validation_rmse_reduction\": " << num(improvement)
-      << ", \"rmse_all_um\": " << num(c.errors.rmse_um) << ", \"penalised_score\": " << num(c.score)
+      << ", \"rmse_fit_um\": " << number_or_null(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << number_or_null(c.errors.rmse_validation_um)
+      << ", \"evidence\": {\"coarse_grid_r2\": " << number_or_null(c.evidence_r2) << ", \"validation_rmse_reduction\": " << number_or_null(improvement)
+      << ", \"rmse_all_um\": " << number_or_null(c.errors.rmse_um) << ", \"penalised_score\": " << number_or_null(c.score)
       << ", \"parameters\": " << c.specs.size() << "}}";
     first = false;
   }
-  j << "\n  ],\n  \"baseline\": {\"rmse_um\": " << num(r.baseline.rmse_um) << ", \"rmse_fit_um\": " << num(r.baseline.rmse_fit_um)
-    << ", \"rmse_validation_um\": " << num(r.baseline.rmse_validation_um) << "},\n  \"fitted\": {\"rmse_um\": "
-    << num(r.fitted.rmse_um) << ", \"rmse_fit_um\": " << num(r.fitted.rmse_fit_um)
-    << ", \"rmse_validation_um\": " << num(r.fitted.rmse_validation_um) << "},\n  \"mismatch\": [";
+  j << "\n  ],\n  \"baseline\": {\"rmse_um\": " << number_or_null(r.baseline.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.baseline.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << number_or_null(r.baseline.rmse_validation_um) << "},\n  \"fitted\": {\"rmse_um\": "
+    << number_or_null(r.fitted.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.fitted.rmse_fit_um)
+    << ", \"rmse_validation_um\": " << number_or_null(r.fitted.rmse_validation_um) << "},\n  \"mismatch\": [";
   for (size_t i = 0; i < r.mismatch.size(); ++i) {
     const auto& w = r.mismatch[i];
-    j << (i ? ",\n" : "\n") << "    {\"recording\": " << w.recording << ", \"t_start_s\": " << num(w.t_start_s)
-      << ", \"t_end_s\": " << num(w.t_end_s) << ", \"regime\": " << quoted(w.regime) << ", \"rms_um\": " << num(w.rms_um) << "}";
+    j << (i ? ",\n" : "\n") << "    {\"recording\": " << w.recording << ", \"t_start_s\": " << number_or_null(w.t_start_s)
+      << ", \"t_end_s\": " << number_or_null(w.t_end_s) << ", \"regime\": " << quoted(w.regime) << ", \"rms_um\": " << number_or_null(w.rms_um) << "}";
   }
   j << "\n  ],\n" << extension_json(r) << ",\n  \"recordings\": [";
   for (size_t i = 0; i < recordings.size(); ++i)
     j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
       << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
-  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << num(cpu) << "\n}\n";
+  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << number_or_null(cpu) << "\n}\n";
   return j.str();
 }
 
 DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
-  const double cpu0 = cpu_s();
+  const double cpu0 = process_cpu_s();
   const LoadedModel lm = load_model(a.model);
   std::vector<Series> data;
   std::vector<long> skipped;
@@ -395,37 +370,37 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     throw std::runtime_error(where(a.model, line_of(root, "model", key)) + ": " + e.what());
   }
   const auto& r = out.result;
-  const double cpu = cpu_s() - cpu0;
+  const double cpu = process_cpu_s() - cpu0;
 
   std::ostringstream s;
   s << "verdict: " << r.verdict << "\n" << r.explanation << "\n";
-  s << "noise (estimated): " << num(r.noise_sigma_um, "%.4f") << " um\n";
-  s << "alignment: I/O delay " << num(r.alignment.io_delay_samples, "%.3g") << " samples estimated, "
+  s << "noise (estimated): " << number_or_null(r.noise_sigma_um, "%.4f") << " um\n";
+  s << "alignment: I/O delay " << number_or_null(r.alignment.io_delay_samples, "%.3g") << " samples estimated, "
     << (r.alignment.declared ? std::to_string(*r.alignment.declared) + " declared" : std::string("none declared")) << ", "
-    << num(r.alignment.used_samples, "%.3g") << " used; sensor offset " << num(r.alignment.offset_um.front(), "%.4g") << " um"
+    << number_or_null(r.alignment.used_samples, "%.3g") << " used; sensor offset " << number_or_null(r.alignment.offset_um.front(), "%.4g") << " um"
     << (r.alignment.note.empty() ? "" : "\n  NOTE: " + r.alignment.note) << "\n";
-  s << "nominal refit (nuisance only): gain " << num(r.nominal_refit.gain, "%.4g") << ", G time scale "
-    << num(r.nominal_refit.time_scale, "%.4g") << ", f shape " << num(r.nominal_refit.poly_shape, "%.4g") << ", held-out " << num(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+  s << "nominal refit (nuisance only): gain " << number_or_null(r.nominal_refit.gain, "%.4g") << ", G time scale "
+    << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f shape " << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ", held-out " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";
     for (const auto& n : r.ambiguous_with) s << " " << n;
     s << "\n  " << r.separating_experiment << "\n";
   }
-  s << "nominal model:   RMSE " << num(r.baseline.rmse_um, "%.4f") << " um, held-out " << num(r.baseline.rmse_validation_um, "%.4f") << " um\n";
-  s << "augmented model: RMSE " << num(r.fitted.rmse_um, "%.4f") << " um, held-out " << num(r.fitted.rmse_validation_um, "%.4f") << " um\n";
+  s << "nominal model:   RMSE " << number_or_null(r.baseline.rmse_um, "%.4f") << " um, held-out " << number_or_null(r.baseline.rmse_validation_um, "%.4f") << " um\n";
+  s << "augmented model: RMSE " << number_or_null(r.fitted.rmse_um, "%.4f") << " um, held-out " << number_or_null(r.fitted.rmse_validation_um, "%.4f") << " um\n";
   for (size_t i = 0; i < skipped.size(); ++i)
     if (skipped[i] > 0) s << a.recordings[i] << ": " << skipped[i] << " rows with non-finite t_s/u_V/y_um skipped\n";
   for (const auto& w : r.mismatch)
-    s << "mismatch: recording " << w.recording << " t " << num(w.t_start_s, "%.2f") << ".." << num(w.t_end_s, "%.2f")
-      << " s, RMS " << num(w.rms_um, "%.3f") << " um, " << w.regime << "\n";
+    s << "mismatch: recording " << w.recording << " t " << number_or_null(w.t_start_s, "%.2f") << ".." << number_or_null(w.t_end_s, "%.2f")
+      << " s, RMS " << number_or_null(w.rms_um, "%.3f") << " um, " << w.regime << "\n";
   s << "candidates (best first):\n";
   for (const auto& c : r.candidates) {
-    s << "  " << to_string(c.effect.kind) << ": evidence R2 " << num(c.evidence_r2, "%.3f");
-    if (c.fitted) s << ", fit " << num(c.errors.rmse_fit_um, "%.4f") << " um, held-out " << num(c.errors.rmse_validation_um, "%.4f") << " um";
+    s << "  " << to_string(c.effect.kind) << ": evidence R2 " << number_or_null(c.evidence_r2, "%.3f");
+    if (c.fitted) s << ", fit " << number_or_null(c.errors.rmse_fit_um, "%.4f") << " um, held-out " << number_or_null(c.errors.rmse_validation_um, "%.4f") << " um";
     s << "\n";
   }
-  s << "cpu: " << num(cpu, "%.2f") << " s (" << r.simulations << " simulations)\n";
+  s << "cpu: " << number_or_null(cpu, "%.2f") << " s (" << r.simulations << " simulations)\n";
   out.summary = s.str();
 
   if (!a.predict.empty()) {
@@ -433,13 +408,13 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
       std::ostringstream p;
       p << "t_s,y_um_baseline,y_um_fitted\n";
       for (size_t k = 0; k < data[i].t_s.size(); ++k)
-        p << num(data[i].t_s[k], "%.6f") << ',' << num(r.y_baseline_um[i][k], "%.6f") << ',' << num(r.y_fitted_um[i][k], "%.6f") << '\n';
-      write_text(a.predict + std::to_string(i) + ".csv", p.str());
+        p << number_or_null(data[i].t_s[k], "%.6f") << ',' << number_or_null(r.y_baseline_um[i][k], "%.6f") << ',' << number_or_null(r.y_fitted_um[i][k], "%.6f") << '\n';
+      write_text_file(a.predict + std::to_string(i) + ".csv", p.str());
     }
   }
   // The JSON and the report first: nothing after this can lose them.
   const std::string model_path = augmented_model_path(a);
-  if (!a.json.empty()) write_text(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
+  if (!a.json.empty()) write_text_file(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
   if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
   if (!model_path.empty()) {
     const std::string text = augmented_model_toml(lm, r, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
@@ -449,7 +424,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     } catch (const std::exception& e) {
       throw std::runtime_error("the augmented model " + model_path + " was not written (the JSON and report were): " + e.what());
     }
-    write_text(model_path, text);
+    write_text_file(model_path, text);
     out.augmented_model_path = model_path;
   }
   return out;

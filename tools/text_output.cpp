@@ -7,7 +7,7 @@
 
 namespace pvcgel::tools {
 
-std::string json_number(double value, const char* printf_format) {
+std::string number_or_null(double value, const char* printf_format) {
   return std::isfinite(value) ? format(printf_format, value) : "null";
 }
 

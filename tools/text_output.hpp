@@ -18,8 +18,8 @@ std::string format(const char* printf_format, Args... values) {
   return buf;
 }
 
-/// A number for JSON: `printf_format` applied, or `null` when not finite.
-std::string json_number(double value, const char* printf_format = "%.6g");
+/// `printf_format` applied, or `null` (JSON's word for it) when the value is not finite.
+std::string number_or_null(double value, const char* printf_format = "%.6g");
 
 /// A TOML array of numbers with 10 significant digits: `[0.127, 1.3057e-05]`.
 std::string toml_array(const std::vector<double>& values);
