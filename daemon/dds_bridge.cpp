@@ -45,14 +45,10 @@ DdsBridge::DdsBridge(const dds::DdsSettings& settings, const SetpointLimits& lim
   participant_ = dds::make_participant(settings_);
   const dds_entity_t p = participant_.get();
   telemetry_ = std::make_unique<TelemetryPublisher>(p, settings_);
-  trajectory_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Trajectory_desc, dds::kTrajectoryTopic, nullptr, nullptr),
-                                  "Trajectory topic");
-  command_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Command_desc, dds::kCommandTopic, nullptr, nullptr),
-                               "Command topic");
-  reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
-                             "CommandReply topic");
-  status_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Status_desc, dds::kStatusTopic, nullptr, nullptr),
-                              "Status topic");
+  trajectory_topic_ = dds::make_topic(p, dds::Topic::trajectory);
+  command_topic_ = dds::make_topic(p, dds::Topic::command);
+  reply_topic_ = dds::make_topic(p, dds::Topic::command_reply);
+  status_topic_ = dds::make_topic(p, dds::Topic::status);
   trajectory_reader_ = dds::Entity(dds_create_reader(p, trajectory_topic_.get(), dds::trajectory_qos(true).get(), nullptr),
                                    "Trajectory reader");
   command_reader_ = dds::Entity(dds_create_reader(p, command_topic_.get(), dds::command_qos(true).get(), nullptr),

@@ -6,8 +6,7 @@ namespace pvcgel::daemon {
 
 TelemetryPublisher::TelemetryPublisher(dds_entity_t participant, const dds::DdsSettings& s)
     : rig_id_(s.rig_id), decimation_(s.telemetry_decimation) {
-  topic_ = dds::Entity(dds_create_topic(participant, &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr, nullptr),
-                       "Telemetry topic");
+  topic_ = dds::make_topic(participant, dds::Topic::telemetry);
   writer_ = dds::Entity(dds_create_writer(participant, topic_.get(), dds::telemetry_qos(s.reliable_telemetry).get(), nullptr),
                         "Telemetry writer");
 }

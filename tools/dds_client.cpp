@@ -66,15 +66,12 @@ DdsClient::DdsClient(const ClientOptions& o, bool telemetry, bool reliable_telem
 
   participant_ = make_client_participant(opt_);
   const dds_entity_t p = participant_.get();
-  reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
-                             "CommandReply topic");
-  status_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Status_desc, dds::kStatusTopic, nullptr, nullptr),
-                              "Status topic");
+  reply_topic_ = dds::make_topic(p, dds::Topic::command_reply);
+  status_topic_ = dds::make_topic(p, dds::Topic::status);
   reply_reader_ = dds::Entity(dds_create_reader(p, reply_topic_.get(), dds::reply_qos().get(), nullptr), "CommandReply reader");
   status_reader_ = dds::Entity(dds_create_reader(p, status_topic_.get(), dds::status_qos().get(), nullptr), "Status reader");
   if (telemetry) {
-    telemetry_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr, nullptr),
-                                   "Telemetry topic");
+    telemetry_topic_ = dds::make_topic(p, dds::Topic::telemetry);
     telemetry_reader_ = dds::Entity(
         dds_create_reader(p, telemetry_topic_.get(), dds::telemetry_qos(reliable_telemetry).get(), nullptr),
         "Telemetry reader");
@@ -174,10 +171,8 @@ void DdsClient::ensure_writers() {
   if (!status_) connect();
   // Created only when needed, so a read-only identity (DDS Security) can still watch and record.
   const dds_entity_t p = participant_.get();
-  trajectory_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Trajectory_desc, dds::kTrajectoryTopic, nullptr, nullptr),
-                                  "Trajectory topic");
-  command_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Command_desc, dds::kCommandTopic, nullptr, nullptr),
-                               "Command topic");
+  trajectory_topic_ = dds::make_topic(p, dds::Topic::trajectory);
+  command_topic_ = dds::make_topic(p, dds::Topic::command);
   trajectory_writer_ = dds::Entity(dds_create_writer(p, trajectory_topic_.get(), dds::trajectory_qos(false).get(), nullptr),
                                    "Trajectory writer");
   command_writer_ = dds::Entity(dds_create_writer(p, command_topic_.get(), dds::command_qos(false).get(), nullptr),

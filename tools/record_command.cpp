@@ -33,9 +33,7 @@ int record(const RecordArgs& a) {
   s.config_path = a.dds_config;
   s.rig_id = a.rig;
   auto participant = dds::make_participant(s);
-  dds::Entity topic(dds_create_topic(participant.get(), &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr,
-                                     nullptr),
-                    "Telemetry topic");
+  dds::Entity topic = dds::make_topic(participant.get(), dds::Topic::telemetry);
   // Reliable keep-all: every sample the daemon's reliable writer sends reaches the file.
   dds_qos_t* qos = dds_create_qos();
   dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));

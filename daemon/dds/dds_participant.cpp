@@ -2,7 +2,10 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <iterator>
 #include <stdexcept>
+
+#include "pvcgel_v1.h"
 
 namespace pvcgel::dds {
 
@@ -94,6 +97,22 @@ Qos status_qos() {
   dds_qset_durability(q.get(), DDS_DURABILITY_TRANSIENT_LOCAL);
   dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 1);
   return q;
+}
+
+Entity make_topic(dds_entity_t participant, Topic topic) {
+  struct Spec {
+    const dds_topic_descriptor_t* type;
+    const char* name;
+    const char* what;
+  };
+  static constexpr Spec kSpecs[] = {{&pvcgel_v1_Telemetry_desc, kTelemetryTopic, "Telemetry topic"},
+                                    {&pvcgel_v1_Trajectory_desc, kTrajectoryTopic, "Trajectory topic"},
+                                    {&pvcgel_v1_Command_desc, kCommandTopic, "Command topic"},
+                                    {&pvcgel_v1_CommandReply_desc, kCommandReplyTopic, "CommandReply topic"},
+                                    {&pvcgel_v1_Status_desc, kStatusTopic, "Status topic"}};
+  static_assert(std::size(kSpecs) == static_cast<std::size_t>(Topic::status) + 1);
+  const Spec& spec = kSpecs[static_cast<std::size_t>(topic)];
+  return Entity(dds_create_topic(participant, spec.type, spec.name, nullptr, nullptr), spec.what);
 }
 
 }  // namespace pvcgel::dds

@@ -4,6 +4,7 @@
 
 #include <dds/dds.h>
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -47,6 +48,12 @@ inline constexpr const char* kTrajectoryTopic = "pvcgel_v1_Trajectory";
 inline constexpr const char* kCommandTopic = "pvcgel_v1_Command";
 inline constexpr const char* kCommandReplyTopic = "pvcgel_v1_CommandReply";
 inline constexpr const char* kStatusTopic = "pvcgel_v1_Status";
+
+/// The five topics of the IDL, created by make_topic with their type and name.
+enum class Topic : std::uint8_t { telemetry, trajectory, command, command_reply, status };
+
+/// Creates `topic` on `participant`. @throws std::runtime_error naming the topic.
+Entity make_topic(dds_entity_t participant, Topic topic);
 
 /// Owned dds_qos_t.
 struct QosDeleter {

@@ -12,12 +12,9 @@ using Clock = std::chrono::steady_clock;
 RigWatcher::RigWatcher(const ClientOptions& o, bool reliable_telemetry) {
   participant_ = make_client_participant(o);
   const dds_entity_t p = participant_.get();
-  telemetry_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Telemetry_desc, dds::kTelemetryTopic, nullptr, nullptr),
-                                 "Telemetry topic");
-  status_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_Status_desc, dds::kStatusTopic, nullptr, nullptr),
-                              "Status topic");
-  reply_topic_ = dds::Entity(dds_create_topic(p, &pvcgel_v1_CommandReply_desc, dds::kCommandReplyTopic, nullptr, nullptr),
-                             "CommandReply topic");
+  telemetry_topic_ = dds::make_topic(p, dds::Topic::telemetry);
+  status_topic_ = dds::make_topic(p, dds::Topic::status);
+  reply_topic_ = dds::make_topic(p, dds::Topic::command_reply);
   // The project's QoS, but a deeper reader history: the live-view profile keeps
   // one sample per rig, which a reader woken a little late would overwrite.
   dds::Qos telemetry_qos = dds::telemetry_qos(reliable_telemetry);
