@@ -25,7 +25,7 @@ SimulatedRig::SimulatedRig(const SimRigConfig& c) : cfg_(c), rng_(c.seed) {
     if (c.hysteresis.enabled || c.creep.enabled)
       throw ConfigError("sim.truth.effect", "a diagnosed effect replaces the rig's built-in effects: set [sim.hysteresis] "
                                             "and [sim.creep] enabled = false");
-    augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, std::span<const diagnosis::Effect>(c.added_effects));
+    augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, std::span<const Effect>(c.added_effects));
   }
   reset_steady_state(0.0);
 }

@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-#include "control/diagnosis/effect.hpp"
+#include "control/effect.hpp"
 #include "control/hammerstein_model.hpp"
 #include "control/lti_filter.hpp"
 
@@ -46,10 +46,10 @@ struct SimRigConfig {
   } creep;
 
   /// Effects diagnosed by `pvcgel diagnose` (`[[sim.truth.effect]]`, dominant
-  /// first, at most diagnosis::kMaxEffects): the truth then runs as
-  /// diagnosis::AugmentedPlant (model plus these effects) and the built-in
+  /// first, at most kMaxEffects): the truth then runs as
+  /// AugmentedPlant (model plus these effects) and the built-in
   /// hysteresis and creep must be off.
-  std::vector<diagnosis::Effect> added_effects{};
+  std::vector<Effect> added_effects{};
 
   /// This rig with `truth` as its plant and every effect beyond the Hammerstein
   /// model switched off (no hysteresis, creep, noise or quantisation; the I/O
@@ -97,7 +97,7 @@ class SimulatedRig final {
   double x_sat_ = 1000.0;
   double u_prev_ = 0.0, h_ = 0.0;
   double y_true_ = 0.0;
-  std::optional<diagnosis::AugmentedPlant> augmented_;
+  std::optional<AugmentedPlant> augmented_;
   std::mt19937_64 rng_;
   std::normal_distribution<double> noise_{0.0, 1.0};
 };

@@ -6,7 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "control/toml_reader.hpp"
+#include "control/config/toml_reader.hpp"
 #include "daemon/config_file.hpp"
 
 namespace pvcgel::daemon {

@@ -5,7 +5,7 @@
 #include <limits>
 #include <string>
 
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "daemon/control_loop.hpp"
 #include "daemon/dds/dds_participant.hpp"
 #include "daemon/hal_config.hpp"

@@ -6,7 +6,7 @@
 #include <optional>
 #include <string>
 
-#include "control/toml_reader.hpp"
+#include "control/config/toml_reader.hpp"
 #include "hal/gpio_lines.hpp"
 #include "hal/modbus_backend.hpp"
 

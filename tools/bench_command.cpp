@@ -11,7 +11,7 @@
 
 #include <toml++/toml.h>
 
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "daemon/config_file.hpp"
 
 #include "tools/gnuplot.hpp"

@@ -13,7 +13,7 @@
 #include <sstream>
 
 #include "control/config_error.hpp"
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/recording.hpp"
@@ -22,6 +22,7 @@
 namespace pvcgel::tools {
 
 namespace fs = std::filesystem;
+using namespace control;
 using namespace control::diagnosis;
 
 namespace {

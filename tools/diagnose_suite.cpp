@@ -17,6 +17,7 @@
 
 namespace pvcgel::tools {
 
+using namespace control;
 using namespace control::diagnosis;
 
 namespace {

@@ -16,7 +16,7 @@
 #include <sstream>
 
 #include "control/config_error.hpp"
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "control/identification/model_selection.hpp"
 #include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "control/diagnosis/effect.hpp"
+#include "control/effect.hpp"
 #include "control/hammerstein_model.hpp"
 
 namespace pvcgel::control::diagnosis {

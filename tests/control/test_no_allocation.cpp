@@ -81,13 +81,13 @@ TEST_P(NoAllocation, ControllerStepRigAndModeSwitchesDoNotAllocate) {
 TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
   // Every effect `pvcgel diagnose` can write into [[sim.truth.effect]], alone and in mixtures of two
   // (every effect paired with its neighbour in this list, log-type creep and a partial mode included).
-  const std::vector<diagnosis::Effect> effects{
-      {diagnosis::EffectKind::hysteresis, {0.02, 20.0}},  {diagnosis::EffectKind::creep, {0.01, 3.0, 1.5}},
-      {diagnosis::EffectKind::dead_zone, {20.0, 30.0}},   {diagnosis::EffectKind::saturation, {100.0, 500.0}},
-      {diagnosis::EffectKind::delay, {2.5e-3}},           {diagnosis::EffectKind::asymmetric_dynamics, {0.3}},
-      {diagnosis::EffectKind::slew_limit, {2000.0}},      {diagnosis::EffectKind::resonance, {20.0, 0.1, 0.95}},
-      {diagnosis::EffectKind::drift, {0.1, 0.01, 1.0}},   {diagnosis::EffectKind::bias_dependent_dynamics, {0.3, 0.5}}};
-  std::vector<std::vector<diagnosis::Effect>> runs;
+  const std::vector<Effect> effects{
+      {EffectKind::hysteresis, {0.02, 20.0}},  {EffectKind::creep, {0.01, 3.0, 1.5}},
+      {EffectKind::dead_zone, {20.0, 30.0}},   {EffectKind::saturation, {100.0, 500.0}},
+      {EffectKind::delay, {2.5e-3}},           {EffectKind::asymmetric_dynamics, {0.3}},
+      {EffectKind::slew_limit, {2000.0}},      {EffectKind::resonance, {20.0, 0.1, 0.95}},
+      {EffectKind::drift, {0.1, 0.01, 1.0}},   {EffectKind::bias_dependent_dynamics, {0.3, 0.5}}};
+  std::vector<std::vector<Effect>> runs;
   for (size_t i = 0; i < effects.size(); ++i) {
     runs.push_back({effects[i]});
     runs.push_back({effects[i], effects[(i + 1) % effects.size()]});
@@ -105,7 +105,7 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
       checksum += rig.measure();
       rig.apply(300.0 + 100.0 * std::sin(0.01 * static_cast<double>(k)));
     }
-    EXPECT_EQ(g_allocations.load() - before, 0) << diagnosis::to_string(mix.front().kind) << " + " << diagnosis::to_string(e.kind);
+    EXPECT_EQ(g_allocations.load() - before, 0) << to_string(mix.front().kind) << " + " << to_string(e.kind);
     EXPECT_TRUE(std::isfinite(checksum));
   }
 }

@@ -11,7 +11,7 @@
 #include <random>
 #include <sstream>
 
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "control/diagnosis/generator.hpp"
 #include "control/simulated_rig.hpp"
 #include "daemon/daemon_config.hpp"
@@ -22,6 +22,7 @@ namespace pvcgel::tools {
 namespace {
 
 namespace fs = std::filesystem;
+using namespace control;
 using namespace control::diagnosis;
 
 fs::path temp_dir(const std::string& name) {

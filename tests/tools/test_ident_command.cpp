@@ -11,7 +11,7 @@
 #include <fstream>
 
 #include "control/config_error.hpp"
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 #include "tools/recording.hpp"
 
 namespace pvcgel::tools {

@@ -1,4 +1,4 @@
-#include "control/diagnosis/effect.hpp"
+#include "control/effect.hpp"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "control/config_error.hpp"
-#include "control/diagnosis/effect_config.hpp"
+#include "control/config/effect_config.hpp"
 #include "control/simulated_rig.hpp"
 
 namespace pvcgel::control::diagnosis {

@@ -1,4 +1,4 @@
-#include "control/diagnosis/effect.hpp"
+#include "control/effect.hpp"
 
 #include <Eigen/LU>
 #include <algorithm>
@@ -8,7 +8,7 @@
 #include "control/config_error.hpp"
 #include "control/state_space.hpp"
 
-namespace pvcgel::control::diagnosis {
+namespace pvcgel::control {
 
 namespace {
 
@@ -347,4 +347,4 @@ std::vector<double> AugmentedPlant::simulate(const std::vector<double>& u, doubl
   return y;
 }
 
-}  // namespace pvcgel::control::diagnosis
+}  // namespace pvcgel::control

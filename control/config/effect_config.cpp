@@ -1,8 +1,8 @@
-#include "control/diagnosis/effect_config.hpp"
+#include "control/config/effect_config.hpp"
 
 #include "control/config_error.hpp"
 
-namespace pvcgel::control::diagnosis {
+namespace pvcgel::control {
 
 namespace {
 
@@ -53,4 +53,4 @@ std::vector<Effect> read_effect_tables(TableReader& parent, const std::string& k
   return effects;
 }
 
-}  // namespace pvcgel::control::diagnosis
+}  // namespace pvcgel::control

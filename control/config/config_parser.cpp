@@ -1,10 +1,10 @@
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 
 #include <sstream>
 
 #include "control/config_error.hpp"
-#include "control/diagnosis/effect_config.hpp"
-#include "control/toml_reader.hpp"
+#include "control/config/effect_config.hpp"
+#include "control/config/toml_reader.hpp"
 
 namespace pvcgel::control {
 
@@ -29,7 +29,7 @@ SimRigConfig read_sim(TableReader& s, double sample_time_s) {
   auto truth = s.table("truth");
   if (truth.present()) {
     sc.truth = read_model(truth);
-    sc.added_effects = diagnosis::read_effect_tables(truth, "effect", sc.sample_time_s);
+    sc.added_effects = read_effect_tables(truth, "effect", sc.sample_time_s);
     truth.finish();
   }
   auto h = s.table("hysteresis");

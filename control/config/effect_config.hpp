@@ -22,10 +22,10 @@
 #include <string>
 #include <vector>
 
-#include "control/diagnosis/effect.hpp"
-#include "control/toml_reader.hpp"
+#include "control/effect.hpp"
+#include "control/config/toml_reader.hpp"
 
-namespace pvcgel::control::diagnosis {
+namespace pvcgel::control {
 
 /// Reads the effect list under `key` of `parent` (empty when absent).
 /// @throws ConfigError naming the key (e.g. "sim.truth.effect[1].alpha") for an
@@ -33,4 +33,4 @@ namespace pvcgel::control::diagnosis {
 ///         combination the plant cannot run (validate_mixture).
 std::vector<Effect> read_effect_tables(TableReader& parent, const std::string& key, double sample_time_s);
 
-}  // namespace pvcgel::control::diagnosis
+}  // namespace pvcgel::control

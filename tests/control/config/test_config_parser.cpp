@@ -1,4 +1,4 @@
-#include "control/config_parser.hpp"
+#include "control/config/config_parser.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 #pragma once
 /// @file
-/// The candidate effects of `pvcgel diagnose`: small, physically meaningful
-/// augmentations of the Hammerstein model, and a plant that runs the model
+/// Effects beyond the Hammerstein model: small, physically meaningful
+/// augmentations that `pvcgel diagnose` fits, and a plant that runs the model
 /// with one of them (the form that is fitted to recordings and that the
 /// simulated rig runs after a diagnosis).
 
@@ -17,7 +17,7 @@
 
 #include "control/hammerstein_model.hpp"
 
-namespace pvcgel::control::diagnosis {
+namespace pvcgel::control {
 
 /// What the nominal model may be missing.
 enum class EffectKind {
@@ -197,4 +197,4 @@ class AugmentedPlant final {
   double y_op_ = 0.0, op_gain_ = 1.0;  ///< operating point (low-passed displacement) for bias-dependent dynamics
 };
 
-}  // namespace pvcgel::control::diagnosis
+}  // namespace pvcgel::control
