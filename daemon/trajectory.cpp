@@ -42,65 +42,71 @@ Trajectory Trajectory::parse(std::string_view spec_view) {
   const auto colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string args = colon == std::string::npos ? "" : spec.substr(colon + 1);
-  auto& a = t.analytic_;
   if (kind == "hold" || kind == "sine" || kind == "multisine") {
-    const auto v = parse_numbers(args, spec);
-    if (kind == "hold" && v.size() == 1) {
-      a.offset_um = v[0];
-      return t;
-    }
-    if (kind == "sine" && v.size() == 3) {
-      a.offset_um = v[0];
-      a.tones[0] = {v[1], v[2], 0.0};
-      a.n_tones = 1;
-    } else if (kind == "multisine" && v.size() >= 3 && v.size() % 2 == 1 &&
-               (v.size() - 1) / 2 <= static_cast<size_t>(control::MultiSine::kMaxTones)) {
-      a.offset_um = v[0];
-      a.n_tones = static_cast<int>((v.size() - 1) / 2);
-      for (int i = 0; i < a.n_tones; ++i)
-        a.tones[static_cast<size_t>(i)] = {v[static_cast<size_t>(1 + 2 * i)], v[static_cast<size_t>(2 + 2 * i)], 0.0};
-    } else {
-      throw ConfigError("trajectory", "'" + spec +
-                                          "': expected hold:R, sine:OFFSET,AMPLITUDE,FREQ_HZ or "
-                                          "multisine:OFFSET,A1,F1[,A2,F2...] (at most 8 tones)");
-    }
-    for (int i = 0; i < a.n_tones; ++i)
-      if (!(a.tones[static_cast<size_t>(i)].frequency_Hz > 0.0))
-        throw ConfigError("trajectory", "'" + spec + "': frequencies must be positive");
+    t.parse_analytic(kind, args);
     return t;
   }
   if (kind == "csv") {
-    std::ifstream in(args);
-    if (!in) throw ConfigError("trajectory", "cannot open CSV file '" + args + "'");
-    std::string line;
-    int lineno = 0;
-    while (std::getline(in, line)) {
-      ++lineno;
-      if (line.empty() || line[0] == '#') continue;
-      if (line.rfind("t_s", 0) == 0) continue;  // header
-      const auto v = [&] {
-        try {
-          return parse_numbers(line, spec);
-        } catch (const ConfigError&) {
-          throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": expected 't_s,r_um', got '" + line + "'");
-        }
-      }();
-      if (v.size() != 2)
-        throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": expected 2 columns t_s,r_um");
-      if (!t.t_.empty() && !(v[0] > t.t_.back()))
-        throw ConfigError("trajectory", args + ":" + std::to_string(lineno) + ": time must increase strictly");
-      t.t_.push_back(v[0]);
-      t.r_.push_back(v[1]);
-      t.line_.push_back(lineno);
-    }
-    if (t.t_.size() < 2) throw ConfigError("trajectory", args + ": needs at least 2 samples");
-    if (t.t_.front() != 0.0) throw ConfigError("trajectory", args + ": the first sample must be at t_s = 0");
-    t.end_s_ = t.t_.back();
+    t.read_csv(args);
     return t;
   }
   throw ConfigError("trajectory", "unknown trajectory '" + spec +
                                       "' (hold:, sine:, multisine:, csv:, paper-0.1hz, paper-0.5hz, "
                                       "paper-1hz, paper-multi)");
+}
+
+void Trajectory::parse_analytic(const std::string& kind, const std::string& args) {
+  const auto v = parse_numbers(args, spec_);
+  auto& a = analytic_;
+  if (kind == "hold" && v.size() == 1) {
+    a.offset_um = v[0];
+    return;
+  }
+  if (kind == "sine" && v.size() == 3) {
+    a.offset_um = v[0];
+    a.tones[0] = {v[1], v[2], 0.0};
+    a.n_tones = 1;
+  } else if (kind == "multisine" && v.size() >= 3 && v.size() % 2 == 1 &&
+             (v.size() - 1) / 2 <= static_cast<size_t>(control::MultiSine::kMaxTones)) {
+    a.offset_um = v[0];
+    a.n_tones = static_cast<int>((v.size() - 1) / 2);
+    for (int i = 0; i < a.n_tones; ++i)
+      a.tones[static_cast<size_t>(i)] = {v[static_cast<size_t>(1 + 2 * i)], v[static_cast<size_t>(2 + 2 * i)], 0.0};
+  } else {
+    throw ConfigError("trajectory", "'" + spec_ +
+                                        "': expected hold:R, sine:OFFSET,AMPLITUDE,FREQ_HZ or "
+                                        "multisine:OFFSET,A1,F1[,A2,F2...] (at most 8 tones)");
+  }
+  for (int i = 0; i < a.n_tones; ++i)
+    if (!(a.tones[static_cast<size_t>(i)].frequency_Hz > 0.0))
+      throw ConfigError("trajectory", "'" + spec_ + "': frequencies must be positive");
+}
+
+void Trajectory::read_csv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError("trajectory", "cannot open CSV file '" + path + "'");
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    if (line.rfind("t_s", 0) == 0) continue;  // header
+    const auto where = path + ":" + std::to_string(lineno) + ": ";
+    std::vector<double> v;
+    try {
+      v = parse_numbers(line, spec_);
+    } catch (const ConfigError&) {
+      throw ConfigError("trajectory", where + "expected 't_s,r_um', got '" + line + "'");
+    }
+    if (v.size() != 2) throw ConfigError("trajectory", where + "expected 2 columns t_s,r_um");
+    if (!t_.empty() && !(v[0] > t_.back())) throw ConfigError("trajectory", where + "time must increase strictly");
+    t_.push_back(v[0]);
+    r_.push_back(v[1]);
+    line_.push_back(lineno);
+  }
+  if (t_.size() < 2) throw ConfigError("trajectory", path + ": needs at least 2 samples");
+  if (t_.front() != 0.0) throw ConfigError("trajectory", path + ": the first sample must be at t_s = 0");
+  end_s_ = t_.back();
 }
 
 void Trajectory::check_limits(const SetpointLimits& l) const {

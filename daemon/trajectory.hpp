@@ -35,6 +35,10 @@ class Trajectory final {
   [[nodiscard]] const std::string& spec() const noexcept { return spec_; }
 
  private:
+  // Configuration time; they throw control::ConfigError.
+  void parse_analytic(const std::string& kind, const std::string& args);
+  void read_csv(const std::string& path);
+
   std::string spec_;
   control::MultiSine analytic_{};
   std::vector<double> t_, r_;  // CSV samples (filled at configuration time only)

@@ -42,6 +42,19 @@ void ModbusBackend::ContextDeleter::operator()(_modbus* ctx) const noexcept {
 }
 
 ModbusBackend::ModbusBackend(const ModbusConfig& config) : config_(config) {
+  plan_input_block();
+  std::int64_t zero = 0;
+  config_.amplifier.output_to_counts(0.0, zero);
+  zero_counts_ = zero;
+  open_link();
+  check_first_contact();
+  set_cycle_timeout();
+  measure_round_trip();
+  link_.store(Link::up, std::memory_order_release);
+  supervisor_ = std::thread([this] { supervise(); });
+}
+
+void ModbusBackend::plan_input_block() {
   const auto& c = config_;
   // The block read each cycle: the sensor and any monitors.
   int lo = c.sensor.address, hi = c.sensor.address + c.sensor.format.register_count();
@@ -57,12 +70,10 @@ ModbusBackend::ModbusBackend(const ModbusConfig& config) : config_(config) {
                           " so one transaction reads them all each cycle");
   block_start_ = static_cast<std::uint16_t>(lo);
   block_count_ = hi - lo;
-  {
-    std::int64_t zero = 0;
-    c.amplifier.output_to_counts(0.0, zero);
-    zero_counts_ = zero;
-  }
+}
 
+void ModbusBackend::open_link() {
+  const auto& c = config_;
   if (c.transport == ModbusConfig::Transport::rtu) {
     const double floor_us = rtu_cycle_floor_us(c, block_count_, c.amplifier.format.register_count());
     if (floor_us > c.io_budget_us) {
@@ -85,9 +96,12 @@ ModbusBackend::ModbusBackend(const ModbusConfig& config) : config_(config) {
   modbus_set_response_timeout(ctx_.get(), kFirstContactTimeout_s, 0);
   if (modbus_connect(ctx_.get()) != 0)
     throw std::runtime_error("Modbus: cannot connect to " + describe_link() + ": " + modbus_error(errno));
+}
 
-  // The amplifier goes to 0 V before anything else; the first answer also tells
-  // whether unit id and addresses are right.
+// The amplifier goes to 0 V before anything else; the first answers also tell
+// whether unit id and addresses are right, so their errors name those keys.
+void ModbusBackend::check_first_contact() {
+  const auto& c = config_;
   if (write_zero() < 0) {
     const int e = errno;
     if (e == ETIMEDOUT)
@@ -112,10 +126,6 @@ ModbusBackend::ModbusBackend(const ModbusConfig& config) : config_(config) {
                             " failed: '" + modbus_error(e) + "'");
     throw std::runtime_error("Modbus: reading the sensor from " + describe_link() + " failed: " + modbus_error(e));
   }
-  set_cycle_timeout();
-  measure_round_trip();
-  link_.store(Link::up, std::memory_order_release);
-  supervisor_ = std::thread([this] { supervise(); });
 }
 
 ModbusBackend::~ModbusBackend() {

@@ -111,6 +111,10 @@ class ModbusBackend final : public Hal {
   /// Counts a failed transaction in `consecutive_failures` (reads and writes
   /// separately) and hands the link to the supervisor at the threshold.
   HalStatus transaction_failed(int rc, int& consecutive_failures) noexcept;
+  // Construction, in order (configuration time: these throw).
+  void plan_input_block();
+  void open_link();
+  void check_first_contact();
   void set_cycle_timeout() noexcept;
   void flush_if_pending() noexcept;
   int read_block() noexcept;

@@ -129,7 +129,9 @@ TEST(ModbusBackend, RtuOverAPtyPairAgainstTheSameServer) {
   test::PtyPair pty;
   const std::string dir = test::scratch_dir("mb_rtu");
   PlantServer server({.transport = "rtu", .device = pty.b(), .journal = dir + "/journal.txt"});
-  auto cfg = test::plant_modbus_config(0, 0.020);  // 50 Hz (115200 baud alone needs >= 4.4 ms per cycle on the wire)
+  // 10 Hz: 115200 baud alone needs >= 4.4 ms per cycle on the wire, and the
+  // 30 ms reply deadline leaves room for a Python server on a loaded machine.
+  auto cfg = test::plant_modbus_config(0, 0.100);
   cfg.transport = hal::ModbusConfig::Transport::rtu;
   cfg.device = pty.a();
   cfg.baud = 115200;
