@@ -13,7 +13,9 @@
 
 #include "control/controller.hpp"
 #include "daemon/control_loop.hpp"
+#include "daemon/dds/dds_messages.hpp"
 #include "tools/dds_client.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -27,11 +29,12 @@ volatile std::sig_atomic_t g_interrupted = 0;
 std::string state_line(const pvcgel_v1_Status& s) {
   char buf[400];
   std::snprintf(buf, sizeof buf, "%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
-                daemon::to_string(static_cast<daemon::LoopState>(s.state)).data(), s.fault ? " (fault " : "",
-                s.fault ? (std::string(daemon::to_string(static_cast<daemon::FaultReason>(s.fault))) + ")").c_str() : "",
-                control::to_string(static_cast<control::ControllerMode>(s.mode)).data(),
-                s.target ? "voltage" : "displacement", s.high_voltage ? "on" : "off", s.t_s,
-                s.queued_until_s > s.t_s ? (std::to_string(s.queued_until_s) + " s").c_str() : "(nothing)");
+                daemon::to_string(state_of(s)).data(), s.fault ? " (fault " : "",
+                s.fault ? (std::string(daemon::to_string(fault_of(s))) + ")").c_str() : "",
+                control::to_string(dds::checked_from_wire<control::ControllerMode>(s.mode, "Status.mode")).data(),
+                daemon::to_string(dds::checked_from_wire<daemon::LoopTarget>(s.target, "Status.target")).data(),
+                s.high_voltage ? "on" : "off", s.t_s,
+                s.queued_until_s > s.t_s ? format("%.3f s", s.queued_until_s).c_str() : "(nothing)");
   return buf;
 }
 
@@ -49,12 +52,17 @@ void print_status(const pvcgel_v1_Status& s) {
               static_cast<unsigned long long>(s.rejects_total));
   std::string by;
   for (std::size_t i = 1; i < std::size(s.rejects_by_reason); ++i)
-    if (s.rejects_by_reason[i] > 0)
-      by += (by.empty() ? "" : ", ") + std::string(daemon::to_string(static_cast<daemon::RejectReason>(i))) + " " +
-            std::to_string(s.rejects_by_reason[i]);
-  if (!by.empty()) std::printf(" (%s); last: %s: %s", by.c_str(),
-                               daemon::to_string(static_cast<daemon::RejectReason>(s.last_reject_reason)).data(),
-                               s.last_reject_detail);
+    if (s.rejects_by_reason[i] > 0) {
+      // A counter this client has no name for (a newer daemon) is shown by its number, not dropped.
+      const auto reason = from_wire<daemon::RejectReason>(static_cast<std::uint8_t>(i));
+      by += (by.empty() ? "" : ", ") + (reason ? std::string(daemon::to_string(*reason)) : "reason " + std::to_string(i)) +
+            " " + std::to_string(s.rejects_by_reason[i]);
+    }
+  if (!by.empty())
+    std::printf(" (%s); last: %s: %s", by.c_str(),
+                daemon::to_string(dds::checked_from_wire<daemon::RejectReason>(s.last_reject_reason, "Status.last_reject_reason"))
+                    .data(),
+                s.last_reject_detail);
   std::printf("\n");
 }
 
@@ -92,7 +100,7 @@ bool reached(CommandKind kind, LoopState s) {
 }
 
 void ensure_running(DdsClient& c) {
-  const auto state = static_cast<daemon::LoopState>(c.status().state);
+  const auto state = state_of(c.status());
   if (state == daemon::LoopState::running) return;
   if (state == daemon::LoopState::disabled) c.command(CommandKind::arm);
   c.command(CommandKind::start);
@@ -145,8 +153,8 @@ std::vector<double> read_setpoint_csv(const std::string& path, double& period_s)
   period_s = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
   for (std::size_t i = 1; i < t.size(); ++i)
     if (std::abs(t[i] - t[i - 1] - period_s) > 1e-3 * period_s + 1e-9)
-      throw std::runtime_error(path + ":" + std::to_string(i + 1) + ": sample spacing " + std::to_string(t[i] - t[i - 1]) +
-                               " s differs from the mean " + std::to_string(period_s) + " s (uniform sampling required)");
+      throw std::runtime_error(path + ":" + std::to_string(i + 1) + ": sample spacing " + format("%g", t[i] - t[i - 1]) +
+                               " s differs from the mean " + format("%g", period_s) + " s (uniform sampling required)");
   return r;
 }
 
@@ -190,8 +198,8 @@ void send(DdsClient& c, SendArgs a) {
     const std::vector<double> all = read_setpoint_csv(a.csv, period);
     const double loop_period = c.status().period_s;
     if (period < loop_period * 0.999)
-      throw std::runtime_error(a.csv + ": sample period " + std::to_string(period) + " s is shorter than the loop's " +
-                               std::to_string(loop_period) + " s");
+      throw std::runtime_error(a.csv + ": sample period " + format("%g", period) + " s is shorter than the loop's " +
+                               format("%g", loop_period) + " s");
     constexpr std::size_t kChunk = 1024;
     std::size_t sent = 0;
     bool first = true;
@@ -283,7 +291,7 @@ void add_client_commands(CLI::App& app) {
       run_client([&] {
         DdsClient c(*opt);
         c.connect();
-        if (kind == CommandKind::start && static_cast<LoopState>(c.status().state) == LoopState::running) {
+        if (kind == CommandKind::start && state_of(c.status()) == LoopState::running) {
           std::printf("rig %s: already RUNNING; start not sent\n", opt->rig.c_str());
           return;
         }
@@ -293,7 +301,7 @@ void add_client_commands(CLI::App& app) {
           c.command(kind);
         }
         // Print the state the command led to, not the Status that was current when the reply came.
-        const auto& s = c.wait_status([kind](const pvcgel_v1_Status& st) { return reached(kind, static_cast<LoopState>(st.state)); },
+        const auto& s = c.wait_status([kind](const pvcgel_v1_Status& st) { return reached(kind, state_of(st)); },
                                       opt->wait_s);
         std::printf("rig %s: %s accepted; now %s\n", opt->rig.c_str(), name, state_line(s).c_str());
       });
