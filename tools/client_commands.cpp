@@ -27,12 +27,16 @@ using daemon::LoopState;
 volatile std::sig_atomic_t g_interrupted = 0;
 
 std::string state_line(const pvcgel_v1_Status& s) {
+  // Decoded one by one, in the order printed: the first unknown value is the one named.
+  const auto state = state_of(s);
+  const auto fault = fault_of(s);
+  const auto mode = dds::checked_from_wire<control::ControllerMode>(s.mode, "Status.mode");
+  const auto target = dds::checked_from_wire<daemon::LoopTarget>(s.target, "Status.target");
+  const bool faulted = fault != daemon::FaultReason::none;
   char buf[400];
-  std::snprintf(buf, sizeof buf, "%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
-                daemon::to_string(state_of(s)).data(), s.fault ? " (fault " : "",
-                s.fault ? (std::string(daemon::to_string(fault_of(s))) + ")").c_str() : "",
-                control::to_string(dds::checked_from_wire<control::ControllerMode>(s.mode, "Status.mode")).data(),
-                daemon::to_string(dds::checked_from_wire<daemon::LoopTarget>(s.target, "Status.target")).data(),
+  std::snprintf(buf, sizeof buf, "%s%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
+                daemon::to_string(state).data(), faulted ? " (fault " : "", faulted ? daemon::to_string(fault).data() : "",
+                faulted ? ")" : "", control::to_string(mode).data(), daemon::to_string(target).data(),
                 s.high_voltage ? "on" : "off", s.t_s,
                 s.queued_until_s > s.t_s ? format("%.3f s", s.queued_until_s).c_str() : "(nothing)");
   return buf;
