@@ -23,6 +23,7 @@ namespace {
 
 using daemon::CommandKind;
 using daemon::LoopState;
+using SegmentKind = daemon::SetpointSegment::Kind;
 
 volatile std::sig_atomic_t g_interrupted = 0;
 
@@ -110,10 +111,10 @@ void ensure_running(DdsClient& c) {
   c.command(CommandKind::start);
 }
 
-pvcgel_v1_Trajectory make_trajectory(const SendArgs& a, std::uint8_t kind, std::vector<double>& values) {
+pvcgel_v1_Trajectory make_trajectory(const SendArgs& a, SegmentKind kind, std::vector<double>& values) {
   pvcgel_v1_Trajectory t{};
-  t.target = a.voltage ? 1 : 0;
-  t.kind = kind;
+  t.target = to_wire(a.voltage ? daemon::LoopTarget::voltage : daemon::LoopTarget::displacement);
+  t.kind = to_wire(kind);
   t.timing = a.append ? 1 : 0;
   t.start_time_s = a.at_s;
   t.duration_s = a.duration_s;
@@ -169,31 +170,31 @@ void send(DdsClient& c, SendArgs a) {
   const auto need = [&](std::size_t n, const char* form) {
     if (v.size() != n) throw std::runtime_error("send " + a.kind + " takes " + form);
   };
-  std::uint8_t kind = 1;
+  SegmentKind kind = SegmentKind::hold;
   if (a.kind == "hold") {
     need(1, "LEVEL");
   } else if (a.kind == "ramp") {
     need(2, "FROM TO (and --duration S)");
-    kind = 2;
+    kind = SegmentKind::ramp;
   } else if (a.kind == "sine") {
     if (v.size() == 3) v.push_back(0.0);
     need(4, "OFFSET AMPLITUDE FREQ_HZ [PHASE_RAD]");
-    kind = 3;
+    kind = SegmentKind::sine;
   } else if (a.kind == "multiharmonic") {
     // OFFSET A1 F1 A2 F2 ...: phases 0.
     if (v.size() < 3 || v.size() % 2 == 0) throw std::runtime_error("send multiharmonic takes OFFSET A1 F1 [A2 F2 ...]");
     std::vector<double> w{v[0]};
     for (std::size_t i = 1; i + 1 < v.size(); i += 2) w.insert(w.end(), {v[i], v[i + 1], 0.0});
     v = w;
-    kind = 4;
+    kind = SegmentKind::multisine;
   } else if (a.kind == "paper") {
     // The paper's references (Section V): y_r1 = 100 + 25 sin(2 pi f t), y_r2 the multi-harmonic sum.
     if (a.csv == "0.1Hz" || a.csv == "0.5Hz" || a.csv == "1Hz") {
       v = {100.0, 25.0, std::stod(a.csv), 0.0};
-      kind = 3;
+      kind = SegmentKind::sine;
     } else if (a.csv == "multi") {
       v = {96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0};
-      kind = 4;
+      kind = SegmentKind::multisine;
     } else {
       throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + a.csv + "'");
     }
@@ -214,7 +215,7 @@ void send(DdsClient& c, SendArgs a) {
       piece.append = !first || a.append;
       piece.blend_s = first ? a.blend_s : 0.0;
       piece.at_s = first ? a.at_s : -1.0;
-      auto t = make_trajectory(piece, 0, chunk);
+      auto t = make_trajectory(piece, SegmentKind::samples, chunk);
       t.period_s = period;
       const Reply r = c.send(t, false);
       if (r.reason == daemon::RejectReason::busy) {
@@ -256,7 +257,7 @@ void watch(DdsClient& c, double duration_s) {
       last = t;
       last_seq = t.seq;
       have = true;
-      if (t.state == static_cast<uint8_t>(daemon::LoopState::running) && std::isfinite(t.e_um)) {
+      if (from_wire<LoopState>(t.state) == LoopState::running && std::isfinite(t.e_um)) {
         err_sq += t.e_um * t.e_um;
         ++n;
       }
@@ -353,7 +354,7 @@ void add_client_commands(CLI::App& app) {
       if (!m) throw CLI::ValidationError("NAME", "'" + *name + "' is not pid, inverse_pid, inverse_pid_dob or inverse_pid_dob_ff");
       run_client([&] {
         DdsClient c(*opt);
-        c.command(CommandKind::set_mode, static_cast<std::uint8_t>(*m));
+        c.command(CommandKind::set_mode, to_wire(*m));
         std::printf("rig %s: mode %s accepted\n", opt->rig.c_str(), name->c_str());
       });
     });
@@ -364,11 +365,14 @@ void add_client_commands(CLI::App& app) {
     auto* cmd = app.add_subcommand("target", "Closed-loop displacement setpoints or open-loop voltage setpoints "
                                              "(identification); not while RUNNING");
     add_client_options(*cmd, *opt);
-    cmd->add_option("TARGET", *name, "displacement | voltage")->required()->check(CLI::IsMember({"displacement", "voltage"}));
+    cmd->add_option("TARGET", *name, "displacement | voltage")
+        ->required()
+        ->check(CLI::IsMember(std::vector<std::string>(daemon::kLoopTargetNames.names().begin(),
+                                                       daemon::kLoopTargetNames.names().end())));
     cmd->callback([opt, name] {
       run_client([&] {
         DdsClient c(*opt);
-        c.command(CommandKind::set_target, *name == "voltage" ? 1 : 0);
+        c.command(CommandKind::set_target, to_wire(*parse_enum<daemon::LoopTarget>(*name)));  // checked by IsMember
         std::printf("rig %s: target %s accepted\n", opt->rig.c_str(), name->c_str());
       });
     });

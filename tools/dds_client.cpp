@@ -207,7 +207,7 @@ std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t 
   dds::copy_bounded(c.rig_id, opt_.rig);
   dds::copy_bounded(c.client_id, client_id_);
   c.command_seq = seq != 0 ? seq : ++next_seq_;
-  c.kind = static_cast<uint8_t>(kind);
+  c.kind = to_wire(kind);
   c.argument = argument;
   if (const auto rc = dds_write(command_writer_.get(), &c); rc < 0)
     throw std::runtime_error(std::string("DDS write of a command failed: ") + dds_strretcode(rc));

@@ -40,7 +40,8 @@ void leave_safe(DdsClient& c) {
   const auto s = rig_state(c);
   if (s == LoopState::armed || s == LoopState::running) c.command(CommandKind::stop);
   if (s != LoopState::fault) wait_for_state(c, LoopState::disabled, 10.0);
-  if (c.status().target != 0) c.command(CommandKind::set_target, 0, false);
+  if (dds::checked_from_wire<daemon::LoopTarget>(c.status().target, "Status.target") != daemon::LoopTarget::displacement)
+    c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::displacement), false);
 }
 
 /// One sine experiment: the segment is sent, and the telemetry of the cycles it
@@ -48,9 +49,9 @@ void leave_safe(DdsClient& c) {
 SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
   std::vector<double> v{p.bias_V, p.amplitude_V, p.frequency_Hz, 0.0};
   pvcgel_v1_Trajectory t{};
-  t.target = 1;
-  t.kind = 3;
-  t.timing = 0;
+  t.target = to_wire(daemon::LoopTarget::voltage);
+  t.kind = to_wire(daemon::SetpointSegment::Kind::sine);
+  t.timing = 0;  // replace what is queued (the wire's 0), starting now
   t.start_time_s = -1;
   // The blend from the previous voltage ends well inside the settling time, which is not analysed.
   t.blend_s = std::min(1.0, 0.5 * p.settle_s);
@@ -136,7 +137,7 @@ std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const 
                validation.size(), rig.rig.c_str(), total_s);
 
   leave_safe(c);
-  c.command(CommandKind::set_target, 1);
+  c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::voltage));
   try {
     c.command(CommandKind::arm);
     c.command(CommandKind::start);
