@@ -10,7 +10,6 @@
 namespace pvcgel::control {
 
 namespace {
-const char* const kModeNames[] = {"pid", "inverse_pid", "inverse_pid_dob", "inverse_pid_dob_ff"};
 
 void check_range(const std::string& key, double v, double lo, double hi) {
   if (!(std::isfinite(v) && v >= lo && v <= hi)) {
@@ -21,7 +20,7 @@ void check_range(const std::string& key, double v, double lo, double hi) {
 }
 
 void check_gains(const PidGains& g, ControllerMode m, double Ts) {
-  const std::string key = std::string("controller.pid.") + kModeNames[static_cast<int>(m)];
+  const std::string key = "controller.pid." + std::string(to_string(m));
   const std::pair<const char*, double> fields[] = {{"kp", g.kp}, {"ki", g.ki}, {"kd", g.kd}, {"tf_s", g.tf_s}};
   for (const auto& [name, v] : fields)
     if (!std::isfinite(v) || v < 0.0)
@@ -30,8 +29,6 @@ void check_gains(const PidGains& g, ControllerMode m, double Ts) {
     throw ConfigError(key + ".tf_s", "derivative filter time constant must be at least one sample");
 }
 }  // namespace
-
-std::string_view to_string(ControllerMode m) noexcept { return kModeNames[static_cast<int>(m)]; }
 
 std::optional<ControllerMode> parse_mode(std::string_view name) noexcept {
   for (auto m : kAllModes)
@@ -90,8 +87,8 @@ Controller::Controller(const HammersteinModel& model, const ControllerConfig& cf
       std::snprintf(buf, sizeof buf,
                     "closed loop of mode %s is unstable on the configured model (largest closed-loop pole "
                     "|z| = %.4f >= 1); reduce the gains",
-                    kModeNames[i], margins_[i].max_closed_loop_pole_abs);
-      throw ConfigError(std::string("controller.pid.") + kModeNames[i], buf);
+                    to_string(m).data(), margins_[i].max_closed_loop_pole_abs);
+      throw ConfigError("controller.pid." + std::string(to_string(m)), buf);
     }
   }
   pid_ = Pid(gains_[static_cast<size_t>(mode_)], cfg.sample_time_s, cfg.antiwindup_tracking_time_s);

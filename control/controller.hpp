@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "control/disturbance_observer.hpp"
+#include "control/enum_table.hpp"
 #include "control/hammerstein_model.hpp"
 #include "control/inverse_correction.hpp"
 #include "control/output_stage.hpp"
@@ -30,8 +31,11 @@ enum class ControllerMode : std::uint8_t {
 inline constexpr std::array<ControllerMode, 4> kAllModes{ControllerMode::pid, ControllerMode::inverse_pid,
                                                          ControllerMode::inverse_pid_dob,
                                                          ControllerMode::inverse_pid_dob_ff};
+inline constexpr auto kControllerModeNames = enum_table<ControllerMode::pid, ControllerMode::inverse_pid_dob_ff>(
+    {"pid", "inverse_pid", "inverse_pid_dob", "inverse_pid_dob_ff"});
+constexpr const auto& names_of(ControllerMode) noexcept { return kControllerModeNames; }
 /// "pid", "inverse_pid", ...
-std::string_view to_string(ControllerMode m) noexcept;
+constexpr std::string_view to_string(ControllerMode m) noexcept { return kControllerModeNames.to_string(m); }
 /// Inverse of to_string.
 std::optional<ControllerMode> parse_mode(std::string_view name) noexcept;
 

@@ -6,25 +6,6 @@
 
 namespace pvcgel::daemon {
 
-namespace {
-constexpr std::string_view kStateNames[] = {"DISABLED", "ARMED", "RUNNING", "RAMP_DOWN", "FAULT"};
-constexpr std::string_view kFaultNames[] = {"none",          "sensor_nan",     "sensor_out_of_range",
-                                            "sensor_stale",  "sensor_timeout", "amplifier_fault",
-                                            "overrun_storm", "setpoint_stale", "hal_error",
-                                            "actuator_write_failed", "hv_enable_failed", "hv_disable_failed"};
-static_assert(std::size(kFaultNames) == static_cast<std::size_t>(FaultReason::count_));
-}  // namespace
-
-// Bounded: the values arrive as octets over DDS and from recordings.
-std::string_view to_string(LoopState s) noexcept {
-  const auto i = static_cast<std::size_t>(s);
-  return i < std::size(kStateNames) ? kStateNames[i] : "?";
-}
-std::string_view to_string(FaultReason r) noexcept {
-  const auto i = static_cast<std::size_t>(r);
-  return i < std::size(kFaultNames) ? kFaultNames[i] : "?";
-}
-
 ControlLoop::ControlLoop(hal::Hal& hal, control::Controller& controller, const Trajectory& trajectory,
                          const SafetyConfig& safety, double period_s, double duration_s)
     : hal_(hal), controller_(controller), trajectory_(trajectory), safety_(safety), Ts_(period_s),
@@ -131,15 +112,22 @@ RejectReason ControlLoop::apply_command(const LoopInput& in, LoopState& state) n
       if (state != LoopState::fault) return RejectReason::illegal_in_state;
       reset_requested_.store(true, std::memory_order_relaxed);
       return RejectReason::accepted;
-    case CommandKind::set_mode:
-      controller_.set_mode(static_cast<control::ControllerMode>(in.argument));
+    case CommandKind::set_mode: {
+      // Checked by the bridge already; an input from elsewhere with an unknown mode is refused, never cast.
+      const auto mode = from_wire<control::ControllerMode>(in.argument);
+      if (!mode) return RejectReason::bad_argument;
+      controller_.set_mode(*mode);
       return RejectReason::accepted;
-    case CommandKind::set_target:
+    }
+    case CommandKind::set_target: {
+      const auto target = from_wire<LoopTarget>(in.argument);
+      if (!target) return RejectReason::bad_argument;
       if (state == LoopState::running || state == LoopState::ramp_down) return RejectReason::illegal_in_state;
-      target_.store(static_cast<LoopTarget>(in.argument), std::memory_order_relaxed);
+      target_.store(*target, std::memory_order_relaxed);
       schedule_.clear();
       schedule_started_ = false;
       return RejectReason::accepted;
+    }
     case CommandKind::clear:
       schedule_.clear();
       return RejectReason::accepted;
@@ -179,7 +167,7 @@ void ControlLoop::take_inputs(LoopState& state) noexcept {
       const auto cause = r == RejectReason::accepted ? FaultReason::none
                          : state == LoopState::fault ? fault_.load(std::memory_order_relaxed)
                                                      : cause_present_;
-      io_->outcomes.push(LoopOutcome{in->ticket, r, static_cast<std::uint8_t>(state), static_cast<std::uint8_t>(cause)});
+      io_->outcomes.push(LoopOutcome{in->ticket, r, state, cause});
     };
     if (in->type == LoopInput::Type::command) {
       answer(apply_command(*in, state));
@@ -389,8 +377,8 @@ void ControlLoop::publish(CycleRecord& rec, LoopState state, LoopTarget target) 
   snap.setpoint = rec.r_um;
   snap.target = target;
   snap.mode = rec.mode;
-  snap.state = static_cast<std::uint8_t>(state);
-  snap.fault = static_cast<std::uint8_t>(rec.fault);
+  snap.state = state;
+  snap.fault = rec.fault;
   snap.high_voltage = rec.high_voltage;
   io_->snapshot.write(snap);
 }

@@ -13,39 +13,18 @@
 #include "control/controller.hpp"
 #include "control/safety_envelope.hpp"
 #include "daemon/loop_io.hpp"
+#include "daemon/loop_state.hpp"
 #include "daemon/trajectory.hpp"
 #include "hal/hal.hpp"
 
 namespace pvcgel::daemon {
 
-/// Safety states. DISABLED -> ARMED -> RUNNING; any fault or stop goes through
-/// RAMP_DOWN (output ramps to 0 V, then high voltage is disabled) to FAULT or
-/// DISABLED. FAULT is left only by an explicit reset, to DISABLED (high voltage
-/// off); arming again is a separate, explicit command.
-enum class LoopState : std::uint8_t { disabled, armed, running, ramp_down, fault };
-
-/// Why the loop left RUNNING for FAULT. Carried in telemetry, recordings and logs.
-enum class FaultReason : std::uint8_t {
-  none,
-  sensor_nan,           ///< the sensor returned NaN or inf
-  sensor_out_of_range,  ///< outside [sensor_min_um, sensor_max_um]
-  sensor_stale,         ///< the exact same reading for too many cycles
-  sensor_timeout,       ///< too many consecutive reads without an answer
-  amplifier_fault,      ///< the amplifier (or its interlock) reports a fault
-  overrun_storm,        ///< too many consecutive missed deadlines
-  setpoint_stale,       ///< the setpoint source ran dry (policy ramp_down)
-  hal_error,            ///< another HAL failure on the sensor read (invalid reply, disconnected)
-  actuator_write_failed,  ///< writing the amplifier command failed (timeouts in a row, invalid reply, link lost)
-  hv_enable_failed,     ///< enabling high voltage failed (the arm is undone)
-  hv_disable_failed,    ///< disabling high voltage reported a failure (retried every cycle)
-  count_
-};
-
-std::string_view to_string(LoopState s) noexcept;
-std::string_view to_string(FaultReason r) noexcept;
-
 /// What to do when the setpoint source runs out.
 enum class StaleSetpointPolicy : std::uint8_t { hold, ramp_down };
+inline constexpr auto kStaleSetpointPolicyNames =
+    enum_table<StaleSetpointPolicy::hold, StaleSetpointPolicy::ramp_down>({"hold", "ramp_down"});
+constexpr const auto& names_of(StaleSetpointPolicy) noexcept { return kStaleSetpointPolicyNames; }
+constexpr std::string_view to_string(StaleSetpointPolicy p) noexcept { return kStaleSetpointPolicyNames.to_string(p); }
 
 /// Safety limits, validated at configuration time.
 struct SafetyConfig {

@@ -70,8 +70,7 @@ void parse_safety(control::TableReader& top, DaemonConfig& cfg) {
   sc.sensor_timeout_cycles = s.integer("sensor_timeout_cycles", sc.sensor_timeout_cycles);
   if (sc.sensor_timeout_cycles < 1) throw ConfigError(s.key("sensor_timeout_cycles"), "must be >= 1");
   const auto policy = s.string("stale_setpoint", "hold");
-  if (policy == "hold") sc.stale_setpoint = StaleSetpointPolicy::hold;
-  else if (policy == "ramp_down") sc.stale_setpoint = StaleSetpointPolicy::ramp_down;
+  if (const auto p = parse_enum<StaleSetpointPolicy>(policy)) sc.stale_setpoint = *p;
   else throw ConfigError(s.key("stale_setpoint"), "must be \"hold\" or \"ramp_down\"");
   sc.soft_start_s = s.number("soft_start_s", sc.soft_start_s);
   check_bound(s, "soft_start_s", sc.soft_start_s, 0.0, 600.0, "a soft start longer than 10 minutes is a trajectory");

@@ -19,13 +19,12 @@ double steady_s() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-std::string detail_for_loop_refusal(RejectReason r, std::uint8_t state, std::uint8_t cause) {
-  const std::string in_state = " (loop state " + std::string(to_string(static_cast<LoopState>(state))) + ")";
+std::string detail_for_loop_refusal(RejectReason r, LoopState state, FaultReason cause) {
+  const std::string in_state = " (loop state " + std::string(to_string(state)) + ")";
   switch (r) {
     case RejectReason::illegal_in_state:
-      if (cause != 0)
-        return "not allowed now" + in_state + ": the fault's cause is still present: " +
-               std::string(to_string(static_cast<FaultReason>(cause)));
+      if (cause != FaultReason::none)
+        return "not allowed now" + in_state + ": the fault's cause is still present: " + std::string(to_string(cause));
       return "not allowed now" + in_state;
     case RejectReason::step_too_large:
       return "the first setpoint steps from the one in force beyond the limit; send a blend_s long enough" + in_state;
@@ -116,17 +115,7 @@ bool DdsBridge::is_resend(const std::string& client_id, std::uint64_t seq, bool 
   auto& list = recent_[client_id];
   for (const auto& r : list) {
     if (r.seq != seq || r.is_trajectory != is_trajectory) continue;
-    if (r.answered) {
-      pvcgel_v1_CommandReply out{};
-      dds::copy_bounded(out.rig_id, settings_.rig_id);
-      dds::copy_bounded(out.client_id, client_id);
-      out.seq = seq;
-      out.is_trajectory = is_trajectory;
-      out.accepted = r.reason == RejectReason::accepted;
-      out.reason = static_cast<uint8_t>(r.reason);
-      dds::copy_bounded(out.detail, r.detail);
-      dds_write(reply_writer_.get(), &out);
-    }
+    if (r.answered) write_reply(client_id, seq, is_trajectory, r.reason, r.detail);
     return true;
   }
   if (recent_.size() > 1024) recent_.clear();  // bounded: a client churning ids loses only resend detection
@@ -142,7 +131,7 @@ bool DdsBridge::is_resend(const std::string& client_id, std::uint64_t seq, bool 
 void DdsBridge::count_reject(RejectReason r, const std::string& detail) {
   counters_.rejects_total.fetch_add(1, std::memory_order_relaxed);
   counters_.rejects_by_reason[static_cast<std::size_t>(r)].fetch_add(1, std::memory_order_relaxed);
-  last_reject_reason_ = static_cast<std::uint8_t>(r);
+  last_reject_reason_ = r;
   last_reject_detail_ = detail;
 }
 
@@ -164,13 +153,18 @@ void DdsBridge::reply(const std::string& client_id, std::uint64_t seq, bool is_t
     last = now;
     if (last_throttle_reply_s_.size() > 1024) last_throttle_reply_s_.clear();
   }
+  write_reply(client_id, seq, is_trajectory, reason, detail);
+}
+
+void DdsBridge::write_reply(const std::string& client_id, std::uint64_t seq, bool is_trajectory, RejectReason reason,
+                            const std::string& detail) {
   pvcgel_v1_CommandReply r{};
   dds::copy_bounded(r.rig_id, settings_.rig_id);
   dds::copy_bounded(r.client_id, client_id);
   r.seq = seq;
   r.is_trajectory = is_trajectory;
   r.accepted = reason == RejectReason::accepted;
-  r.reason = static_cast<uint8_t>(reason);
+  r.reason = to_wire(reason);
   dds::copy_bounded(r.detail, detail);
   dds_write(reply_writer_.get(), &r);
 }
@@ -248,6 +242,8 @@ void DdsBridge::take_commands() {
         continue;
       }
       Verdict v = validate_command(c->kind, c->argument, c->client_id, c->command_seq);
+      const auto kind = from_wire<CommandKind>(c->kind);  // validate_command refused an unknown kind already
+      if (v.ok() && !kind) v = {RejectReason::unknown_command, "command kind " + std::to_string(c->kind) + " is unknown"};
       if (v.ok() && io_.inputs.size() >= io_.inputs.capacity())
         v = {RejectReason::queue_full, "the input queue to the loop is full; send slower"};
       if (!v.ok()) {
@@ -258,7 +254,7 @@ void DdsBridge::take_commands() {
       pending_[ticket] = Pending{client, c->command_seq, false};
       LoopInput in;
       in.type = LoopInput::Type::command;
-      in.command = static_cast<CommandKind>(c->kind);
+      in.command = *kind;
       in.argument = c->argument;
       in.ticket = ticket;
       io_.inputs.push(in);
@@ -286,10 +282,10 @@ void DdsBridge::publish_status(const LoopSnapshot& snap) {
   pvcgel_v1_Status s{};
   dds::copy_bounded(s.rig_id, settings_.rig_id);
   s.t_s = snap.now_s;
-  s.state = snap.state;
-  s.fault = snap.fault;
-  s.mode = static_cast<uint8_t>(snap.mode);
-  s.target = static_cast<uint8_t>(snap.target);
+  s.state = to_wire(snap.state);
+  s.fault = to_wire(snap.fault);
+  s.mode = to_wire(snap.mode);
+  s.target = to_wire(snap.target);
   s.high_voltage = snap.high_voltage;
   s.period_s = identity_.period_s;
   s.queued_until_s = snap.queued_until_s;
@@ -306,7 +302,7 @@ void DdsBridge::publish_status(const LoopSnapshot& snap) {
   s.rejects_total = counters_.rejects_total.load(std::memory_order_relaxed);
   for (std::size_t i = 0; i < counters_.rejects_by_reason.size() && i < std::size(s.rejects_by_reason); ++i)
     s.rejects_by_reason[i] = counters_.rejects_by_reason[i].load(std::memory_order_relaxed);
-  s.last_reject_reason = last_reject_reason_;
+  s.last_reject_reason = to_wire(last_reject_reason_);
   dds::copy_bounded(s.last_reject_detail, last_reject_detail_);
   dds::copy_bounded(s.config_hash, identity_.config_hash);
   dds::copy_bounded(s.version, identity_.version);

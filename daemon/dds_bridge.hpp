@@ -33,7 +33,7 @@ struct DaemonIdentity {
 /// Counters of the bridge (any thread may read).
 struct BridgeCounters {
   std::atomic<std::uint64_t> chunks_accepted{0}, commands_accepted{0}, rejects_total{0}, other_rig{0};
-  std::array<std::atomic<std::uint32_t>, static_cast<std::size_t>(RejectReason::count_)> rejects_by_reason{};
+  std::array<std::atomic<std::uint32_t>, kRejectReasonNames.size()> rejects_by_reason{};
 };
 
 /// Owns the participant, every reader and writer, and the bridge thread.
@@ -66,6 +66,9 @@ class DdsBridge final {
   void publish_status(const LoopSnapshot& snap);
   void reply(const std::string& client_id, std::uint64_t seq, bool is_trajectory, RejectReason reason,
              const std::string& detail);
+  /// Writes one CommandReply (the only place one is built).
+  void write_reply(const std::string& client_id, std::uint64_t seq, bool is_trajectory, RejectReason reason,
+                   const std::string& detail);
   void count_reject(RejectReason r, const std::string& detail);
   bool rate_allows(const std::string& client_id, bool trajectory, double now_s);
   /// True when (client, seq) was seen recently: a resend. Answers it again if the answer is known.
@@ -93,7 +96,7 @@ class DdsBridge final {
   std::unordered_map<std::string, std::deque<Recent>> recent_;  // last 32 inputs per client
   std::uint32_t new_ticket() noexcept { return ++next_ticket_ == 0 ? ++next_ticket_ : next_ticket_; }
   std::uint32_t next_ticket_ = 0;
-  std::uint8_t last_reject_reason_ = 0;
+  RejectReason last_reject_reason_ = RejectReason::accepted;
   std::string last_reject_detail_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> realtime_{false};

@@ -21,8 +21,8 @@ hal::RegisterFormat register_format(TableReader& t, const hal::RegisterFormat& f
   if (width != 16 && width != 32) throw ConfigError(t.key("width_bits"), "must be 16 or 32");
   f.width_bits = static_cast<std::uint8_t>(width);
   f.is_signed = t.boolean("signed", f.is_signed);
-  const std::string order = t.string("word_order", f.word_order == hal::WordOrder::high_first ? "high_first" : "low_first");
-  const auto wo = hal::parse_word_order(order);
+  const std::string order = t.string("word_order", std::string(to_string(f.word_order)));
+  const auto wo = parse_enum<hal::WordOrder>(order);
   if (!wo) throw ConfigError(t.key("word_order"), "must be \"high_first\" or \"low_first\" (got '" + order + "')");
   f.word_order = *wo;
   return f;
@@ -44,11 +44,11 @@ hal::InputChannel input_channel(TableReader& t, const hal::InputChannel& fallbac
   return ch;
 }
 
-void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
-  c.period_s = period_s;
+/// Transport, address and serial line settings, and the unit id.
+void parse_link(TableReader& m, hal::ModbusConfig& c) {
   const std::string transport = m.string("transport", "tcp");
-  if (transport == "tcp") c.transport = hal::ModbusConfig::Transport::tcp;
-  else if (transport == "rtu") c.transport = hal::ModbusConfig::Transport::rtu;
+  const auto parsed = parse_enum<hal::ModbusConfig::Transport>(transport);
+  if (parsed) c.transport = *parsed;
   else throw ConfigError(m.key("transport"), "must be \"tcp\" or \"rtu\" (got '" + transport + "')");
   const bool tcp = c.transport == hal::ModbusConfig::Transport::tcp;
   const auto only_for = [&](const std::string& k, bool allowed, const char* what) {
@@ -75,7 +75,10 @@ void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
   c.unit_id = m.integer("unit_id", c.unit_id);
   if (c.unit_id < (tcp ? 0 : 1) || c.unit_id > (tcp ? 255 : 247))
     throw ConfigError(m.key("unit_id"), tcp ? "must be 0..255" : "must be 1..247 on a serial line");
+}
 
+/// The I/O budget per cycle, the response timeout, and reconnection.
+void parse_timing(TableReader& m, double period_s, hal::ModbusConfig& c) {
   const int period_us = static_cast<int>(std::lround(period_s * 1e6));
   c.io_budget_us = m.integer("io_budget_us", std::max(1, period_us / 2));
   if (c.io_budget_us < 1 || c.io_budget_us > period_us * 9 / 10)
@@ -93,7 +96,9 @@ void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
   if (!(c.reconnect_min_s > 0.0)) throw ConfigError(m.key("reconnect_min_s"), "must be positive");
   c.reconnect_max_s = m.number("reconnect_max_s", c.reconnect_max_s);
   if (!(c.reconnect_max_s >= c.reconnect_min_s)) throw ConfigError(m.key("reconnect_max_s"), "must be >= reconnect_min_s");
+}
 
+void parse_sensor(TableReader& m, hal::ModbusConfig& c) {
   auto s = m.table("sensor");
   if (!s.present()) throw ConfigError(m.key("sensor"), "is required: the displacement sensor's register");
   const std::string fc = s.string("register_type", "input");
@@ -102,7 +107,9 @@ void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
   if (!s.has("um_per_count")) throw ConfigError(s.key("um_per_count"), "is required (micrometres per count)");
   c.sensor = input_channel(s, c.sensor, "um_per_count", "offset_um");
   s.finish();
+}
 
+void parse_amplifier(TableReader& m, hal::ModbusConfig& c) {
   auto a = m.table("amplifier");
   if (!a.present()) throw ConfigError(m.key("amplifier"), "is required: the amplifier's control register");
   auto& amp = c.amplifier;
@@ -120,7 +127,10 @@ void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
   if (!amp.output_to_counts(0.0, zero))
     throw ConfigError(a.key("input_offset_V"), "0 V cannot be represented in the amplifier register");
   a.finish();
+}
 
+/// The optional monitors of the amplifier's output voltage and current.
+void parse_monitors(TableReader& m, hal::ModbusConfig& c) {
   if (auto mv = m.table("monitor_voltage"); mv.present()) {
     if (!mv.has("address")) throw ConfigError(mv.key("address"), "is required");
     c.monitor_voltage = input_channel(mv, {c.sensor.address, {16, false, hal::WordOrder::high_first}, {1.0, 0.0}},
@@ -139,6 +149,15 @@ void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
     if (!(c.monitor_current_max_mA > 0.0)) throw ConfigError(mc.key("max_mA"), "must be positive");
     mc.finish();
   }
+}
+
+void parse_modbus(TableReader& m, double period_s, hal::ModbusConfig& c) {
+  c.period_s = period_s;
+  parse_link(m, c);
+  parse_timing(m, period_s, c);
+  parse_sensor(m, c);
+  parse_amplifier(m, c);
+  parse_monitors(m, c);
   m.finish();
 }
 

@@ -2,18 +2,14 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
+
+#include "control/controller.hpp"
 
 namespace pvcgel::daemon {
 
 namespace {
-
-constexpr std::string_view kReasonNames[] = {
-    "accepted",      "malformed",       "not_finite",      "out_of_range",     "step_too_large",
-    "slope_too_large", "in_the_past",   "too_far_ahead",   "chunk_too_large",  "bad_period",
-    "bad_duration",  "target_mismatch", "queue_full",      "rate_limited",     "illegal_in_state",
-    "unknown_command", "bad_argument",  "other_rig",       "busy"};
-static_assert(std::size(kReasonNames) == static_cast<std::size_t>(RejectReason::count_));
 
 template <typename... Args>
 Verdict reject(RejectReason r, const char* fmt, Args... args) {
@@ -34,154 +30,198 @@ Range range_for(LoopTarget t, const SetpointLimits& l) {
 
 }  // namespace
 
-std::string_view to_string(RejectReason r) noexcept {
-  const auto i = static_cast<std::size_t>(r);
-  return i < std::size(kReasonNames) ? kReasonNames[i] : "?";
-}
+namespace {
 
-Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& limits, const LoopView& loop,
-                            std::vector<SetpointSegment>& out) {
-  using Kind = SetpointSegment::Kind;
+using Kind = SetpointSegment::Kind;
+
+/// The codes, ids and numbers every message must have right, whatever its kind.
+Verdict check_fields(const TrajectoryMessage& m, const LoopView& loop) {
   if (m.client_id.empty()) return reject(RejectReason::malformed, "client_id is empty");
   if (m.chunk_seq == 0) return reject(RejectReason::malformed, "chunk_seq must be nonzero");
-  if (m.target > 1) return reject(RejectReason::malformed, "target %u is not 0 (displacement) or 1 (voltage)", m.target);
-  if (m.kind > 4) return reject(RejectReason::malformed, "kind %u is not 0..4 (samples, hold, ramp, sine, multisine)", m.kind);
+  const auto target = from_wire<LoopTarget>(m.target);
+  if (!target) return reject(RejectReason::malformed, "target %u is not 0 (displacement) or 1 (voltage)", m.target);
+  if (!from_wire<Kind>(m.kind))
+    return reject(RejectReason::malformed, "kind %u is not 0..4 (samples, hold, ramp, sine, multisine)", m.kind);
   if (m.timing > 1) return reject(RejectReason::malformed, "timing %u is not 0 (replace) or 1 (append)", m.timing);
-  const auto target = static_cast<LoopTarget>(m.target);
-  if (target != loop.target)
+  if (*target != loop.target)
     return reject(RejectReason::target_mismatch, "setpoints for %s but the loop is in %s mode (send set_target first)",
-                  m.target ? "voltage" : "displacement", loop.target == LoopTarget::voltage ? "voltage" : "displacement");
+                  to_string(*target).data(), to_string(loop.target).data());
   for (const double x : {m.start_time_s, m.period_s, m.duration_s, m.blend_s})
     if (!std::isfinite(x)) return reject(RejectReason::not_finite, "a time field is %f", x);
   for (std::size_t i = 0; i < m.values.size(); ++i)
     if (!std::isfinite(m.values[i])) return reject(RejectReason::not_finite, "values[%zu] is %f", i, m.values[i]);
   if (m.blend_s < 0.0 || m.blend_s > 60.0) return reject(RejectReason::bad_duration, "blend_s %.6g is not in 0..60 s", m.blend_s);
   if (m.duration_s < 0.0) return reject(RejectReason::bad_duration, "duration_s %.6g is negative", m.duration_s);
+  return {};
+}
 
-  const auto kind = static_cast<Kind>(m.kind);
-  const std::size_t n = m.values.size();
-  const Range range = range_for(target, limits);
-  auto in_range = [&](double lo, double hi) { return lo >= range.min && hi <= range.max; };
-
-  // Timing: when the first value applies.
+/// An absolute start must lie in the loop's window; appending must leave room ahead.
+/// Times print with %.10g: a start time of 1e300 s is named in a dozen characters, not 300 digits.
+Verdict check_timing(const TrajectoryMessage& m, const SetpointLimits& limits, const LoopView& loop) {
   const bool at = m.timing == 0 && m.start_time_s >= 0.0;
   if (at && m.start_time_s < loop.now_s - limits.past_tolerance_s)
-    return reject(RejectReason::in_the_past, "start_time_s %.4f is before the loop time %.4f", m.start_time_s, loop.now_s);
+    return reject(RejectReason::in_the_past, "start_time_s %.10g is before the loop time %.10g", m.start_time_s, loop.now_s);
   if (at && m.start_time_s > loop.now_s + limits.max_lead_s)
-    return reject(RejectReason::too_far_ahead, "start_time_s %.4f is more than %.3g s after the loop time %.4f",
+    return reject(RejectReason::too_far_ahead, "start_time_s %.10g is more than %.3g s after the loop time %.10g",
                   m.start_time_s, limits.max_lead_s, loop.now_s);
   if (m.timing == 1 && loop.queued_until_s > loop.now_s + limits.max_lead_s)
-    return reject(RejectReason::busy, "setpoints are already queued up to %.3f s, more than %.3g s ahead of %.3f",
+    return reject(RejectReason::busy, "setpoints are already queued up to %.10g s, more than %.3g s ahead of %.10g",
                   loop.queued_until_s, limits.max_lead_s, loop.now_s);
+  return {};
+}
 
+/// The segment the message describes, before its values: kind, target, timing and start.
+SetpointSegment segment_head(const TrajectoryMessage& m) {
+  const bool at = m.timing == 0 && m.start_time_s >= 0.0;
   SetpointSegment seg;
-  seg.kind = kind;
-  seg.target = target;
+  seg.kind = *from_wire<Kind>(m.kind);  // checked by check_fields
+  seg.target = *from_wire<LoopTarget>(m.target);
   seg.chunk_seq = m.chunk_seq;
   seg.blend_s = m.blend_s;
   seg.timing = m.timing == 1 ? SetpointSegment::Timing::append
                              : (at ? SetpointSegment::Timing::at : SetpointSegment::Timing::now);
   seg.start_s = at ? m.start_time_s : 0.0;
-  const double inf = std::numeric_limits<double>::infinity();
+  return seg;
+}
 
-  if (kind == Kind::samples) {
-    if (n == 0) return reject(RejectReason::malformed, "a samples chunk has no values");
-    if (static_cast<int>(n) > limits.max_chunk_samples)
-      return reject(RejectReason::chunk_too_large, "%zu samples, the limit is %d per chunk", n, limits.max_chunk_samples);
-    if (m.period_s < loop.period_s - 1e-12 || m.period_s > 1.0)
-      return reject(RejectReason::bad_period, "period_s %.6g is outside %.6g (the loop period) .. 1 s", m.period_s, loop.period_s);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!in_range(m.values[i], m.values[i]))
-        return reject(RejectReason::out_of_range, "values[%zu] = %.6g %s is outside %.6g..%.6g", i, m.values[i], range.unit,
-                      range.min, range.max);
-      if (i > 0) {
-        const double step = std::abs(m.values[i] - m.values[i - 1]);
-        if (step > range.max_step)
-          return reject(RejectReason::step_too_large, "values[%zu] jumps %.6g %s from the sample before (limit %.6g)", i,
-                        step, range.unit, range.max_step);
-        if (step / m.period_s > range.max_slope)
-          return reject(RejectReason::slope_too_large, "values[%zu] changes at %.6g %s/s (limit %.6g)", i,
-                        step / m.period_s, range.unit, range.max_slope);
-      }
-    }
-    const int pieces = static_cast<int>((n + SetpointSegment::kMaxValues - 1) / SetpointSegment::kMaxValues);
-    if (loop.queued_segments + pieces > SetpointSchedule::kCapacity)
-      return reject(RejectReason::queue_full, "the loop's queue holds %d segments; %d more do not fit (capacity %d)",
-                    loop.queued_segments, pieces, SetpointSchedule::kCapacity);
-    for (int p = 0; p < pieces; ++p) {
-      SetpointSegment piece = seg;
-      const std::size_t first = static_cast<std::size_t>(p) * SetpointSegment::kMaxValues;
-      piece.count = static_cast<int>(std::min<std::size_t>(SetpointSegment::kMaxValues, n - first));
-      std::copy_n(m.values.begin() + static_cast<std::ptrdiff_t>(first), piece.count, piece.values.begin());
-      piece.period_s = m.period_s;
-      if (p > 0) {
-        piece.continues = true;
-        piece.timing = SetpointSegment::Timing::append;
-        piece.blend_s = 0.0;
-        piece.start_s = 0.0;
-      }
-      piece.end_s = piece.start_s + piece.count * m.period_s;
-      out.push_back(piece);
-    }
-    return {};
+/// Each sample in range, and each step between samples within the step and slope limits.
+Verdict check_samples(std::span<const double> v, double period_s, const Range& range) {
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (v[i] < range.min || v[i] > range.max)
+      return reject(RejectReason::out_of_range, "values[%zu] = %.6g %s is outside %.6g..%.6g", i, v[i], range.unit,
+                    range.min, range.max);
+    if (i == 0) continue;
+    const double step = std::abs(v[i] - v[i - 1]);
+    if (step > range.max_step)
+      return reject(RejectReason::step_too_large, "values[%zu] jumps %.6g %s from the sample before (limit %.6g)", i, step,
+                    range.unit, range.max_step);
+    if (step / period_s > range.max_slope)
+      return reject(RejectReason::slope_too_large, "values[%zu] changes at %.6g %s/s (limit %.6g)", i, step / period_s,
+                    range.unit, range.max_slope);
   }
+  return {};
+}
 
-  // Parametric segments.
-  if (loop.queued_segments + 1 > SetpointSchedule::kCapacity)
-    return reject(RejectReason::queue_full, "the loop's queue is full (%d segments)", SetpointSchedule::kCapacity);
-  double lo = 0, hi = 0, slope = 0;
-  switch (kind) {
+/// A chunk of samples, checked and cut into contiguous pieces of at most kMaxValues.
+Verdict cut_samples(const TrajectoryMessage& m, const SetpointLimits& limits, const LoopView& loop,
+                    const SetpointSegment& seg, std::vector<SetpointSegment>& out) {
+  const std::size_t n = m.values.size();
+  if (n == 0) return reject(RejectReason::malformed, "a samples chunk has no values");
+  if (static_cast<int>(n) > limits.max_chunk_samples)
+    return reject(RejectReason::chunk_too_large, "%zu samples, the limit is %d per chunk", n, limits.max_chunk_samples);
+  if (m.period_s < loop.period_s - 1e-12 || m.period_s > 1.0)
+    return reject(RejectReason::bad_period, "period_s %.6g is outside %.6g (the loop period) .. 1 s", m.period_s, loop.period_s);
+  if (Verdict v = check_samples(m.values, m.period_s, range_for(seg.target, limits)); !v.ok()) return v;
+  const int pieces = static_cast<int>((n + SetpointSegment::kMaxValues - 1) / SetpointSegment::kMaxValues);
+  if (loop.queued_segments + pieces > SetpointSchedule::kCapacity)
+    return reject(RejectReason::queue_full, "the loop's queue holds %d segments; %d more do not fit (capacity %d)",
+                  loop.queued_segments, pieces, SetpointSchedule::kCapacity);
+  for (int p = 0; p < pieces; ++p) {
+    SetpointSegment piece = seg;
+    const std::size_t first = static_cast<std::size_t>(p) * SetpointSegment::kMaxValues;
+    piece.count = static_cast<int>(std::min<std::size_t>(SetpointSegment::kMaxValues, n - first));
+    std::copy_n(m.values.begin() + static_cast<std::ptrdiff_t>(first), piece.count, piece.values.begin());
+    piece.period_s = m.period_s;
+    if (p > 0) {
+      piece.continues = true;
+      piece.timing = SetpointSegment::Timing::append;
+      piece.blend_s = 0.0;
+      piece.start_s = 0.0;
+    }
+    piece.end_s = piece.start_s + piece.count * m.period_s;
+    out.push_back(piece);
+  }
+  return {};
+}
+
+/// What a parametric segment spans and how fast it changes at most.
+struct Span {
+  double lo = 0.0, hi = 0.0, slope = 0.0;
+};
+
+/// A sine's or multisine's span (offset -+ the sum of amplitudes) and steepest slope (the sum of 2 pi f a).
+Verdict sine_span(const TrajectoryMessage& m, const LoopView& loop, Kind kind, Span& span) {
+  const std::size_t n = m.values.size();
+  const std::size_t terms = (n - 1) / 3;
+  if (n < 4 || (n - 1) % 3 != 0 || (kind == Kind::sine && n != 4) || terms > SetpointSegment::kMaxSineTerms)
+    return reject(RejectReason::malformed, "%s takes [offset, a1, f1_Hz, phi1_rad, ...] (%s), got %zu values",
+                  kind == Kind::sine ? "sine" : "multisine", kind == Kind::sine ? "4 values" : "1 + 3k values, k <= 8", n);
+  double amp = 0.0;
+  for (std::size_t i = 1; i < n; i += 3) {
+    const double a = std::abs(m.values[i]), f = m.values[i + 1];
+    if (f < 0.0 || f > 0.5 / loop.period_s)
+      return reject(RejectReason::bad_argument, "frequency %.6g Hz is outside 0..%.6g Hz (Nyquist)", f, 0.5 / loop.period_s);
+    amp += a;
+    span.slope += 2.0 * std::numbers::pi * f * a;
+  }
+  span.lo = m.values[0] - amp;
+  span.hi = m.values[0] + amp;
+  return {};
+}
+
+/// The span of a hold, ramp or (multi)sine, its end time set in `seg`; refuses a wrong number of values.
+Verdict parametric_span(const TrajectoryMessage& m, const LoopView& loop, SetpointSegment& seg, Span& span) {
+  const std::size_t n = m.values.size();
+  const double inf = std::numeric_limits<double>::infinity();
+  const double end_s = m.duration_s > 0.0 ? seg.start_s + m.duration_s : inf;
+  switch (seg.kind) {
     case Kind::hold:
       if (n != 1) return reject(RejectReason::malformed, "hold takes 1 value [level], got %zu", n);
-      lo = hi = m.values[0];
-      seg.end_s = m.duration_s > 0.0 ? seg.start_s + m.duration_s : inf;
-      break;
+      span = {m.values[0], m.values[0], 0.0};
+      seg.end_s = end_s;
+      return {};
     case Kind::ramp:
       if (n != 2) return reject(RejectReason::malformed, "ramp takes 2 values [from, to], got %zu", n);
       if (!(m.duration_s > 0.0)) return reject(RejectReason::bad_duration, "a ramp needs duration_s > 0");
-      lo = std::min(m.values[0], m.values[1]);
-      hi = std::max(m.values[0], m.values[1]);
-      slope = (hi - lo) / m.duration_s;
+      span.lo = std::min(m.values[0], m.values[1]);
+      span.hi = std::max(m.values[0], m.values[1]);
+      span.slope = (span.hi - span.lo) / m.duration_s;
       seg.end_s = inf;  // then holds `to`
-      break;
+      return {};
     case Kind::sine:
-    case Kind::multisine: {
-      const std::size_t terms = (n - 1) / 3;
-      if (n < 4 || (n - 1) % 3 != 0 || (kind == Kind::sine && n != 4) || terms > SetpointSegment::kMaxSineTerms)
-        return reject(RejectReason::malformed, "%s takes [offset, a1, f1_Hz, phi1_rad, ...] (%s), got %zu values",
-                      kind == Kind::sine ? "sine" : "multisine", kind == Kind::sine ? "4 values" : "1 + 3k values, k <= 8", n);
-      double amp = 0;
-      for (std::size_t i = 1; i < n; i += 3) {
-        const double a = std::abs(m.values[i]), f = m.values[i + 1];
-        if (f < 0.0 || f > 0.5 / loop.period_s)
-          return reject(RejectReason::bad_argument, "frequency %.6g Hz is outside 0..%.6g Hz (Nyquist)", f, 0.5 / loop.period_s);
-        amp += a;
-        slope += 2.0 * std::numbers::pi * f * a;
-      }
-      lo = m.values[0] - amp;
-      hi = m.values[0] + amp;
-      seg.end_s = m.duration_s > 0.0 ? seg.start_s + m.duration_s : inf;
-      break;
-    }
+    case Kind::multisine:
+      seg.end_s = end_s;
+      return sine_span(m, loop, seg.kind, span);
     case Kind::samples:
       break;
   }
-  if (!in_range(lo, hi))
-    return reject(RejectReason::out_of_range, "the segment spans %.6g..%.6g %s, outside %.6g..%.6g", lo, hi, range.unit,
-                  range.min, range.max);
+  return reject(RejectReason::malformed, "kind %u is not parametric", m.kind);
+}
+
+/// A hold, ramp or (multi)sine: one segment, whose whole span and steepest slope must fit the limits.
+Verdict parametric_segment(const TrajectoryMessage& m, const SetpointLimits& limits, const LoopView& loop,
+                           SetpointSegment seg, std::vector<SetpointSegment>& out) {
+  if (loop.queued_segments + 1 > SetpointSchedule::kCapacity)
+    return reject(RejectReason::queue_full, "the loop's queue is full (%d segments)", SetpointSchedule::kCapacity);
+  Span span;
+  if (Verdict v = parametric_span(m, loop, seg, span); !v.ok()) return v;
+  const Range range = range_for(seg.target, limits);
+  if (span.lo < range.min || span.hi > range.max)
+    return reject(RejectReason::out_of_range, "the segment spans %.6g..%.6g %s, outside %.6g..%.6g", span.lo, span.hi,
+                  range.unit, range.min, range.max);
   // Per loop cycle the envelope allows min(max_step, max_slope * period): a segment must fit both.
   const double max_slope = std::min(range.max_slope, range.max_step / loop.period_s);
-  if (slope > max_slope)
-    return reject(RejectReason::slope_too_large, "the segment changes at up to %.6g %s/s (limit %.6g)", slope, range.unit,
-                  max_slope);
-  seg.count = static_cast<int>(n);
+  if (span.slope > max_slope)
+    return reject(RejectReason::slope_too_large, "the segment changes at up to %.6g %s/s (limit %.6g)", span.slope,
+                  range.unit, max_slope);
+  seg.count = static_cast<int>(m.values.size());
   std::copy(m.values.begin(), m.values.end(), seg.values.begin());
-  if (kind == Kind::ramp) {
+  if (seg.kind == Kind::ramp) {
     seg.values[2] = m.duration_s;
     seg.count = 3;
   }
   out.push_back(seg);
   return {};
+}
+
+}  // namespace
+
+Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& limits, const LoopView& loop,
+                            std::vector<SetpointSegment>& out) {
+  if (Verdict v = check_fields(m, loop); !v.ok()) return v;
+  if (Verdict v = check_timing(m, limits, loop); !v.ok()) return v;
+  const SetpointSegment seg = segment_head(m);
+  return seg.kind == Kind::samples ? cut_samples(m, limits, loop, seg, out) : parametric_segment(m, limits, loop, seg, out);
 }
 
 bool start_step_allowed(const SetpointSegment& seg, double from, double first_value,
@@ -196,10 +236,11 @@ bool start_step_allowed(const SetpointSegment& seg, double from, double first_va
 Verdict validate_command(std::uint8_t kind, std::uint8_t argument, std::string_view client_id, std::uint64_t seq) {
   if (client_id.empty()) return reject(RejectReason::malformed, "client_id is empty");
   if (seq == 0) return reject(RejectReason::malformed, "command_seq must be nonzero");
-  if (kind < 1 || kind > 7) return reject(RejectReason::unknown_command, "command kind %u is not 1..7", kind);
-  if (kind == static_cast<std::uint8_t>(CommandKind::set_mode) && argument > 3)
+  const auto command = from_wire<CommandKind>(kind);
+  if (!command) return reject(RejectReason::unknown_command, "command kind %u is not 1..7", kind);
+  if (command == CommandKind::set_mode && !from_wire<control::ControllerMode>(argument))
     return reject(RejectReason::bad_argument, "mode %u is not 0..3 (pid, inverse_pid, inverse_pid_dob, inverse_pid_dob_ff)", argument);
-  if (kind == static_cast<std::uint8_t>(CommandKind::set_target) && argument > 1)
+  if (command == CommandKind::set_target && !from_wire<LoopTarget>(argument))
     return reject(RejectReason::bad_argument, "target %u is not 0 (displacement) or 1 (voltage)", argument);
   return {};
 }

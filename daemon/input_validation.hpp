@@ -11,6 +11,7 @@
 #include <string_view>
 #include <vector>
 
+#include "control/enum_table.hpp"
 #include "daemon/setpoint_schedule.hpp"
 
 namespace pvcgel::daemon {
@@ -37,11 +38,14 @@ enum class RejectReason : std::uint8_t {
   bad_argument,       ///< command argument out of range
   other_rig,          ///< addressed to another rig (counted, never answered)
   busy,               ///< back-pressure: the queue already reaches max_lead_s ahead; send again later (not counted as a rejection)
-  count_
 };
-
-/// Stable name of a reason ("step_too_large", ...).
-std::string_view to_string(RejectReason r) noexcept;
+/// Stable names ("step_too_large", ...), part of the interface like the numbers.
+inline constexpr auto kRejectReasonNames = enum_table<RejectReason::accepted, RejectReason::busy>(
+    {"accepted", "malformed", "not_finite", "out_of_range", "step_too_large", "slope_too_large", "in_the_past",
+     "too_far_ahead", "chunk_too_large", "bad_period", "bad_duration", "target_mismatch", "queue_full", "rate_limited",
+     "illegal_in_state", "unknown_command", "bad_argument", "other_rig", "busy"});
+constexpr const auto& names_of(RejectReason) noexcept { return kRejectReasonNames; }
+constexpr std::string_view to_string(RejectReason r) noexcept { return kRejectReasonNames.to_string(r); }
 
 /// Limits for incoming setpoints, from the [setpoints] configuration table.
 struct SetpointLimits {
@@ -96,8 +100,13 @@ Verdict validate_trajectory(const TrajectoryMessage& m, const SetpointLimits& li
 /// limits, the target, and the segment's blend): the loop's check.
 bool start_step_allowed(const SetpointSegment& seg, double from, double first_value, const SetpointLimits& limits) noexcept;
 
-/// Command kinds of the DDS interface (Command.kind).
+/// Command kinds of the DDS interface (Command.kind; 0 is not a command). The
+/// names are the `pvcgel` subcommands that send them.
 enum class CommandKind : std::uint8_t { arm = 1, start, stop, reset, set_mode, set_target, clear };
+inline constexpr auto kCommandKindNames = enum_table<CommandKind::arm, CommandKind::clear>(
+    {"arm", "start", "stop", "reset", "mode", "target", "clear"});
+constexpr const auto& names_of(CommandKind) noexcept { return kCommandKindNames; }
+constexpr std::string_view to_string(CommandKind k) noexcept { return kCommandKindNames.to_string(k); }
 
 /// Validate a command's kind and argument (legality in the current state is the loop's call).
 Verdict validate_command(std::uint8_t kind, std::uint8_t argument, std::string_view client_id, std::uint64_t seq);

@@ -9,14 +9,12 @@
 
 #include "control/controller.hpp"
 #include "daemon/input_validation.hpp"
+#include "daemon/loop_state.hpp"
 #include "daemon/setpoint_schedule.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "daemon/triple_buffer.hpp"
 
 namespace pvcgel::daemon {
-
-enum class LoopState : std::uint8_t;
-enum class FaultReason : std::uint8_t;
 
 /// One input for the loop. `ticket` lets the DDS thread match the outcome to
 /// the client and sequence number it came with.
@@ -38,8 +36,8 @@ struct LoopOutcome {
   RejectReason reason = RejectReason::accepted;
   /// For refusals: the state the loop was in, and the fault whose cause is
   /// still present (an arm refused because of it).
-  std::uint8_t state = 0;
-  std::uint8_t cause = 0;
+  LoopState state = LoopState::disabled;
+  FaultReason cause = FaultReason::none;
 };
 
 /// What the DDS thread needs to know about the loop, every cycle.
@@ -50,8 +48,8 @@ struct LoopSnapshot {
   int queued_segments = 0;
   LoopTarget target = LoopTarget::displacement;
   control::ControllerMode mode = control::ControllerMode::pid;
-  std::uint8_t state = 0;
-  std::uint8_t fault = 0;
+  LoopState state = LoopState::disabled;
+  FaultReason fault = FaultReason::none;
   bool high_voltage = false;
 };
 

@@ -2,20 +2,20 @@
 #include <CLI/CLI.hpp>
 #include <systemd/sd-daemon.h>
 
-#include <charconv>
-#include <csignal>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <iostream>
+#include <optional>
 #include <thread>
 
 #include "control/config_error.hpp"
 #include "daemon/daemon_config.hpp"
-#include "daemon/hal_factory.hpp"
-#include "daemon/recorder.hpp"
 #include "daemon/dds_bridge.hpp"
-#include "hal/sim_backend.hpp"
+#include "daemon/hal_factory.hpp"
+#include "daemon/record_consumer.hpp"
+#include "daemon/recorder.hpp"
+#include "daemon/supervisor.hpp"
 
 using namespace pvcgel;
 using namespace pvcgel::daemon;
@@ -38,181 +38,59 @@ struct Options {
   bool check_only = false;
 };
 
-int run(const Options& opt) {
-  DaemonConfig cfg = load_daemon_config(opt.config);
-  if (!opt.trajectory.empty()) cfg.trajectory = opt.trajectory;
-  if (!std::isnan(opt.duration)) cfg.duration_s = opt.duration;
-  const bool has_trajectory = !cfg.trajectory.empty();
-  const Trajectory trajectory = Trajectory::parse(has_trajectory ? cfg.trajectory : "hold:0");
-  // A local trajectory passes the same [setpoints] checks as one received over DDS (and the envelope at play time).
-  if (has_trajectory) trajectory.check_limits(cfg.setpoint_limits);
-  control::Controller controller(cfg.rig.model, cfg.rig.controller);
-  auto sim = std::make_unique<hal::SimBackend>(cfg.rig.sim);
-  if (!opt.inject.empty()) {
-    const auto at = opt.inject.find('@');
-    const auto kind = hal::parse_sim_fault(opt.inject.substr(0, at));
-    if (!kind || at == std::string::npos)
-      throw control::ConfigError("--inject-fault", "expected KIND@SECONDS with KIND one of sensor_nan, sensor_stuck, "
-                                                   "sensor_out_of_range, sensor_dropout, amplifier_fault, write_failed, "
-                                                   "write_timeout, hv_enable_failed; got '" +
-                                                       opt.inject + "'");
-    const std::string when = opt.inject.substr(at + 1);
-    double t_s = NAN;
-    const auto [end, ec] = std::from_chars(when.data(), when.data() + when.size(), t_s);
-    if (ec != std::errc() || end != when.data() + when.size() || !(t_s >= 0.0))
-      throw control::ConfigError("--inject-fault", "'" + when + "' is not a time in seconds (KIND@SECONDS)");
-    sim->schedule(*kind, t_s);
+/// Everything the run needs, checked before anything starts.
+struct Setup {
+  DaemonConfig cfg;
+  bool has_trajectory = false;
+  Trajectory trajectory;
+  std::optional<FaultInjection> inject;
+};
+
+Setup load_setup(const Options& opt) {
+  Setup s{load_daemon_config(opt.config), false, Trajectory::parse("hold:0"), std::nullopt};
+  if (!opt.trajectory.empty()) s.cfg.trajectory = opt.trajectory;
+  if (!std::isnan(opt.duration)) s.cfg.duration_s = opt.duration;
+  s.has_trajectory = !s.cfg.trajectory.empty();
+  if (s.has_trajectory) {
+    s.trajectory = Trajectory::parse(s.cfg.trajectory);
+    // A local trajectory passes the same [setpoints] checks as one received over DDS (and the envelope at play time).
+    s.trajectory.check_limits(s.cfg.setpoint_limits);
   }
-  if (opt.check_only) {
-    std::cout << "pvcgeld: configuration " << opt.config << " is valid (hash " << cfg.config_hash << ")\n";
-    return kExitOk;
-  }
-  const auto hal_ptr = make_hal(cfg, std::move(sim), !opt.inject.empty());
-  hal::Hal& hal = *hal_ptr;
+  if (!opt.inject.empty()) s.inject = parse_fault_injection(opt.inject);
+  return s;
+}
 
-  ControlLoop loop(hal, controller, trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
-  loop.set_auto_start(has_trajectory);
-  loop.set_exit_on_fault(std::isfinite(cfg.duration_s));
-  loop.set_limits(cfg.setpoint_limits);
-  auto io = std::make_unique<LoopIo>();
-  if (cfg.dds_enabled) loop.attach_io(*io, cfg.setpoint_limits);
+std::unique_ptr<Recorder> open_recorder(const Options& opt, const DaemonConfig& cfg, const hal::Hal& hal) {
+  if (opt.record.empty()) return nullptr;
+  auto recorder = std::make_unique<Recorder>(
+      opt.record, RecordingHeader{{"rate_hz", std::to_string(std::lround(1.0 / cfg.realtime.period_s))},
+                                  {"config", opt.config},
+                                  {"config_hash", cfg.config_hash},
+                                  {"start_time", iso_time_now()},
+                                  {"hal_backend", std::string(hal.name())},
+                                  {"trajectory", cfg.trajectory},
+                                  {"mode", std::string(control::to_string(cfg.rig.controller.mode))},
+                                  {"soft_start_s", std::to_string(cfg.safety.soft_start_s)}});
+  if (!recorder->created_directory().empty())
+    std::fprintf(stderr, "pvcgeld: created directory %s for the recording\n", recorder->created_directory().c_str());
+  return recorder;
+}
 
-  std::unique_ptr<Recorder> recorder;
-  if (!opt.record.empty()) {
-    recorder = std::make_unique<Recorder>(
-        opt.record, std::vector<std::pair<std::string, std::string>>{
-                        {"rate_hz", std::to_string(static_cast<int>(std::lround(1.0 / cfg.realtime.period_s)))},
-                        {"config", opt.config},
-                        {"config_hash", cfg.config_hash},
-                        {"start_time", iso_time_now()},
-                        {"hal_backend", std::string(hal.name())},
-                        {"trajectory", cfg.trajectory},
-                        {"mode", std::string(control::to_string(cfg.rig.controller.mode))},
-                        {"soft_start_s", std::to_string(cfg.safety.soft_start_s)}});
-  }
-
-  // Signals are taken synchronously by this thread; the loop thread never sees them.
-  sigset_t signals;
-  sigemptyset(&signals);
-  sigaddset(&signals, SIGTERM);
-  sigaddset(&signals, SIGINT);
-  sigaddset(&signals, SIGUSR1);  // reset a fault (also a DDS command)
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-
-  RealtimeReport report = prepare_process(cfg.realtime);
-  auto stats = std::make_unique<LoopStatistics>();
-  auto ring = std::make_unique<RecordRing>();
-  auto latest = std::make_unique<LatestRecord>();
-  std::atomic<bool> started{false}, loop_done{false};
-  // DDS before the loop thread: joining may fail (a configuration error) and nothing may be running then.
-  std::unique_ptr<DdsBridge> bridge;
-  if (cfg.dds_enabled)
-    bridge = std::make_unique<DdsBridge>(cfg.dds, cfg.setpoint_limits, *io, *stats,
-                                         DaemonIdentity{cfg.config_hash, PVCGEL_VERSION, std::string(hal.name()),
-                                                        cfg.realtime.period_s});
-  TelemetryPublisher* publisher = bridge ? &bridge->telemetry() : nullptr;
-  std::thread rt([&] {
-    run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
-    loop_done.store(true, std::memory_order_release);
-  });
-  // The one consumer of the loop's records: recording and telemetry, off the RT thread.
-  std::exception_ptr writer_error;
-  std::thread writer([&] {
-    try {
-      for (;;) {
-        bool any = false;
-        while (auto r = ring->pop()) {
-          any = true;
-          if (recorder) recorder->write(*r);
-          if (publisher) publisher->publish(*r);
-        }
-        if (recorder) recorder->flush_if_due();
-        if (!any) {
-          if (loop_done.load(std::memory_order_acquire) && ring->size() == 0) break;
-          std::this_thread::sleep_for(std::chrono::milliseconds(2));
-        }
-      }
-      if (recorder) recorder->finish();
-    } catch (...) {
-      writer_error = std::current_exception();
-    }
-  });
-  while (!started.load(std::memory_order_acquire)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  if (!report.warnings.empty())
-    std::cerr << "pvcgeld: WARNING: " << report.warnings << "\n";
+void log_start(const Setup& s, const RealtimeReport& report, const hal::Hal& hal, bool dds) {
+  const auto& cfg = s.cfg;
+  if (!report.warnings.empty()) std::cerr << "pvcgeld: WARNING: " << report.warnings << "\n";
   std::cerr << "pvcgeld: loop running at " << 1.0 / cfg.realtime.period_s << " Hz, "
             << (report.realtime_scheduling ? "SCHED_FIFO priority " + std::to_string(cfg.realtime.priority)
                                            : std::string("NOT real-time (SCHED_OTHER)"))
             << ", memory " << (report.memory_locked ? "locked" : "NOT locked") << ", backend " << hal.name()
             << ", mode " << control::to_string(cfg.rig.controller.mode)
-            << (has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)"))
-            << (bridge ? ", DDS as rig '" + cfg.dds.rig_id + "' on domain " + std::to_string(cfg.dds.domain)
-                          : std::string())
+            << (s.has_trajectory ? ", trajectory " + cfg.trajectory : std::string(", idle (no trajectory)"))
+            << (dds ? ", DDS as rig '" + cfg.dds.rig_id + "' on domain " + std::to_string(cfg.dds.domain) : std::string())
             << "\n";
-  sd_notify(0, "READY=1");
+}
 
-  std::uint64_t watchdog_usec = 0;
-  const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0;
-  std::uint64_t last_cycles = 0;
-  auto last_ping = std::chrono::steady_clock::now();
-  bool stop_sent = false, signalled = false;
-  LoopState last_state = LoopState::disabled;
-  FaultReason last_fault = FaultReason::none;
-  auto last_status = last_ping;
-  const auto started_at = std::chrono::steady_clock::now();
-  while (!loop_done.load(std::memory_order_acquire)) {
-    const timespec timeout{0, 20'000'000};
-    const int sig = sigtimedwait(&signals, nullptr, &timeout);
-    // Without a local trajectory (driven over DDS) --duration bounds the daemon's run time.
-    if (!has_trajectory && std::isfinite(cfg.duration_s) && !stop_sent &&
-        std::chrono::steady_clock::now() - started_at > std::chrono::duration<double>(cfg.duration_s)) {
-      std::cerr << "pvcgeld: --duration reached: ramping down\n";
-      loop.request_stop();
-      stop_sent = true;
-    }
-    if (sig == SIGUSR1) {
-      std::cerr << "pvcgeld: SIGUSR1: fault reset requested (FAULT -> DISABLED, high voltage off; arm again explicitly)\n";
-      loop.request_reset();
-    }
-    if ((sig == SIGTERM || sig == SIGINT) && !stop_sent) {
-      std::cerr << "pvcgeld: " << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ": ramping down\n";
-      sd_notify(0, "STOPPING=1");
-      loop.request_stop();
-      stop_sent = signalled = true;
-    }
-    const auto now = std::chrono::steady_clock::now();
-    // Log state changes as they happen (the RT thread itself never logs).
-    const CycleRecord& rec = latest->read();
-    if (rec.state != last_state || rec.fault != last_fault) {
-      std::fprintf(stderr, "pvcgeld: t = %.3f s: %s%s%s\n", rec.t_s, to_string(rec.state).data(),
-                   rec.fault != FaultReason::none ? ", fault " : "",
-                   rec.fault != FaultReason::none ? to_string(rec.fault).data() : "");
-      last_state = rec.state;
-      last_fault = rec.fault;
-    }
-    if (now - last_status > std::chrono::seconds(1)) {
-      char status[320];
-      std::snprintf(status, sizeof status, "STATUS=%s%s%s, u %.1f V, y %.2f um, r %.2f um, %llu overruns, hal %s",
-                    to_string(rec.state).data(), rec.fault != FaultReason::none ? " " : "",
-                    rec.fault != FaultReason::none ? to_string(rec.fault).data() : "", rec.u_V, rec.y_um, rec.r_um,
-                    static_cast<unsigned long long>(stats->overruns.load(std::memory_order_relaxed)),
-                    health_summary(hal.health()).c_str());
-      sd_notify(0, status);
-      last_status = now;
-    }
-    if (watchdog && now - last_ping > std::chrono::microseconds(watchdog_usec / 2)) {
-      // Only a loop that keeps cycling without an overrun storm feeds the watchdog.
-      const auto cycles = stats->cycles.load(std::memory_order_relaxed);
-      if (cycles > last_cycles && loop.fault() != FaultReason::overrun_storm) sd_notify(0, "WATCHDOG=1");
-      last_cycles = cycles;
-      last_ping = now;
-    }
-  }
-  rt.join();
-  writer.join();
-  if (writer_error) std::rethrow_exception(writer_error);
-
-  const auto& s = *stats;
+void log_stop(const ControlLoop& loop, const LoopStatistics& s, const Recorder* recorder, const std::string& record_path,
+              const hal::Hal& hal) {
   std::fprintf(stderr,
                "pvcgeld: stopped in state %s (fault: %s) after %llu cycles; wake-up latency p50 %.0f us, p99 %.0f "
                "us, p99.9 %.0f us, max %.0f us; compute p99 %.0f us; overruns %llu; records dropped %llu",
@@ -224,12 +102,66 @@ int run(const Options& opt) {
                static_cast<unsigned long long>(s.records_dropped.load()));
   if (recorder)
     std::fprintf(stderr, "; recorded %llu rows to %s (sequence gaps %llu)", static_cast<unsigned long long>(recorder->rows()),
-                 opt.record.c_str(), static_cast<unsigned long long>(recorder->gaps()));
+                 record_path.c_str(), static_cast<unsigned long long>(recorder->gaps()));
   std::fprintf(stderr, "; actuator failures %llu, envelope acted on reference %llu / output %llu cycles",
                static_cast<unsigned long long>(loop.actuator_failures()),
                static_cast<unsigned long long>(loop.envelope().reference_limited_cycles()),
                static_cast<unsigned long long>(loop.envelope().output().limited_cycles()));
   std::fprintf(stderr, "; hal %s: %s\n", hal.name().data(), health_summary(hal.health()).c_str());
+}
+
+/// Starts DDS, the loop thread and the record consumer, supervises until the loop is done, and logs the summary.
+/// @return true when a signal asked the daemon to stop.
+bool run_threads(const Options& opt, const Setup& setup, ControlLoop& loop, hal::Hal& hal, LoopIo& io,
+                 Recorder* recorder) {
+  const DaemonConfig& cfg = setup.cfg;
+  const sigset_t signals = block_supervised_signals();  // before any thread starts: none of them sees a signal
+  RealtimeReport report = prepare_process(cfg.realtime);
+  auto stats = std::make_unique<LoopStatistics>();
+  auto ring = std::make_unique<RecordRing>();
+  auto latest = std::make_unique<LatestRecord>();
+  std::atomic<bool> started{false}, loop_done{false};
+  // DDS before the loop thread: joining may fail (a configuration error) and nothing may be running then.
+  std::unique_ptr<DdsBridge> bridge;
+  if (cfg.dds_enabled)
+    bridge = std::make_unique<DdsBridge>(cfg.dds, cfg.setpoint_limits, io, *stats,
+                                         DaemonIdentity{cfg.config_hash, PVCGEL_VERSION, std::string(hal.name()),
+                                                        cfg.realtime.period_s});
+  std::thread rt([&] {
+    run_realtime_loop(loop, cfg.realtime, *stats, *ring, *latest, report, started);
+    loop_done.store(true, std::memory_order_release);
+  });
+  RecordConsumer consumer(*ring, loop_done, recorder, bridge ? &bridge->telemetry() : nullptr);
+  while (!started.load(std::memory_order_acquire)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  log_start(setup, report, hal, bridge != nullptr);
+  sd_notify(0, "READY=1");
+  Supervisor supervisor(loop, hal, *stats, *latest, signals, setup.has_trajectory ? INFINITY : cfg.duration_s);
+  const bool signalled = supervisor.run(loop_done);
+  rt.join();
+  consumer.join();
+  log_stop(loop, *stats, recorder, opt.record, hal);
+  return signalled;
+}
+
+int run(const Options& opt) {
+  const Setup setup = load_setup(opt);
+  const DaemonConfig& cfg = setup.cfg;
+  control::Controller controller(cfg.rig.model, cfg.rig.controller);
+  if (opt.check_only) {
+    // The simulated rig checks its [sim] table when it is built; a real backend is not connected to.
+    if (cfg.hal.backend == "sim") make_hal(cfg, setup.inject);
+    std::cout << "pvcgeld: configuration " << opt.config << " is valid (hash " << cfg.config_hash << ")\n";
+    return kExitOk;
+  }
+  const auto hal = make_hal(cfg, setup.inject);
+  ControlLoop loop(*hal, controller, setup.trajectory, cfg.safety, cfg.realtime.period_s, cfg.duration_s);
+  loop.set_auto_start(setup.has_trajectory);
+  loop.set_exit_on_fault(std::isfinite(cfg.duration_s));
+  loop.set_limits(cfg.setpoint_limits);
+  auto io = std::make_unique<LoopIo>();
+  if (cfg.dds_enabled) loop.attach_io(*io, cfg.setpoint_limits);
+  const auto recorder = open_recorder(opt, cfg, *hal);
+  const bool signalled = run_threads(opt, setup, loop, *hal, *io, recorder.get());
   // Asked to stop (SIGTERM/SIGINT) the daemon did what it was told: exit 0 even when it was waiting in FAULT
   // (the fault is logged above); a run that ends in FAULT by itself exits 3.
   return loop.state() == LoopState::fault && !signalled ? kExitFault : kExitOk;
@@ -244,9 +176,12 @@ int main(int argc, char** argv) {
   app.add_option("-t,--trajectory", opt.trajectory,
                  "setpoints: hold:R | sine:OFFSET,AMP,FREQ | multisine:OFFSET,A1,F1,... | csv:FILE | "
                  "paper-0.1hz | paper-0.5hz | paper-1hz | paper-multi");
-  app.add_option("-d,--duration", opt.duration, "run the trajectory this long (s), then ramp down and exit (without a trajectory: run this long)")
+  app.add_option("-d,--duration", opt.duration,
+                 "play the trajectory this long (s) after its soft start (safety.soft_start_s, not counted), then ramp "
+                 "down and exit; without a trajectory: run this long")
       ->check(CLI::PositiveNumber);
-  app.add_option("-r,--record", opt.record, "record every cycle to this CSV file");
+  app.add_option("-r,--record", opt.record,
+                 "record every cycle to this CSV file (missing parent directories are created, and said so)");
   app.add_option("--inject-fault", opt.inject, "sim backend only: KIND@SECONDS, e.g. sensor_nan@3");
   app.add_flag("--check-config", opt.check_only, "validate the configuration and exit");
   CLI11_PARSE(app, argc, argv);

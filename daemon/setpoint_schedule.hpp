@@ -7,12 +7,19 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <string_view>
+
+#include "control/enum_table.hpp"
 
 namespace pvcgel::daemon {
 
 /// What the setpoints drive: the displacement (closed loop, um) or the
 /// amplifier voltage directly (open loop, V; for identification experiments).
 enum class LoopTarget : std::uint8_t { displacement = 0, voltage = 1 };
+inline constexpr auto kLoopTargetNames =
+    enum_table<LoopTarget::displacement, LoopTarget::voltage>({"displacement", "voltage"});
+constexpr const auto& names_of(LoopTarget) noexcept { return kLoopTargetNames; }
+constexpr std::string_view to_string(LoopTarget t) noexcept { return kLoopTargetNames.to_string(t); }
 
 /// One validated piece of a trajectory, in loop time. Fixed size and trivially
 /// copyable so it crosses the lock-free queue by value; a long chunk of
@@ -47,6 +54,15 @@ struct SetpointSegment {
   /// [offset, a1, f1_Hz, phi1_rad, ...].
   std::array<double, kMaxValues> values{};
 };
+
+inline constexpr auto kSegmentKindNames = enum_table<SetpointSegment::Kind::samples, SetpointSegment::Kind::multisine>(
+    {"samples", "hold", "ramp", "sine", "multisine"});
+constexpr const auto& names_of(SetpointSegment::Kind) noexcept { return kSegmentKindNames; }
+constexpr std::string_view to_string(SetpointSegment::Kind k) noexcept { return kSegmentKindNames.to_string(k); }
+inline constexpr auto kSegmentTimingNames =
+    enum_table<SetpointSegment::Timing::at, SetpointSegment::Timing::append>({"at", "now", "append"});
+constexpr const auto& names_of(SetpointSegment::Timing) noexcept { return kSegmentTimingNames; }
+constexpr std::string_view to_string(SetpointSegment::Timing t) noexcept { return kSegmentTimingNames.to_string(t); }
 
 /// The real-time side's queue of segments, time-ordered. Every member is
 /// noexcept and allocation-free after construction.

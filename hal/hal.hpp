@@ -5,6 +5,8 @@
 #include <cstdint>
 #include <string_view>
 
+#include "control/enum_table.hpp"
+
 namespace pvcgel::hal {
 
 /// Result of one HAL operation. Returned, never thrown: the loop must not unwind.
@@ -16,17 +18,11 @@ enum class HalStatus : std::uint8_t {
   disconnected,    ///< link down; reconnection happens off the real-time thread
 };
 
-/// Human-readable name of a status.
-constexpr std::string_view to_string(HalStatus s) noexcept {
-  switch (s) {
-    case HalStatus::ok: return "ok";
-    case HalStatus::timeout: return "timeout";
-    case HalStatus::invalid_reply: return "invalid_reply";
-    case HalStatus::device_fault: return "device_fault";
-    case HalStatus::disconnected: return "disconnected";
-  }
-  return "?";
-}
+inline constexpr auto kHalStatusNames = enum_table<HalStatus::ok, HalStatus::disconnected>(
+    {"ok", "timeout", "invalid_reply", "device_fault", "disconnected"});
+constexpr const auto& names_of(HalStatus) noexcept { return kHalStatusNames; }
+/// Name of a status (for logs and tests).
+constexpr std::string_view to_string(HalStatus s) noexcept { return kHalStatusNames.to_string(s); }
 
 /// Counters a backend keeps for status reports (read from non-RT threads).
 struct HalHealth {

@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "control/enum_table.hpp"
 #include "hal/hal.hpp"
 #include "hal/register_map.hpp"
 
@@ -23,6 +24,8 @@ namespace pvcgel::hal {
 struct ModbusConfig {
   /// Physical link.
   enum class Transport : std::uint8_t { tcp, rtu };
+  static constexpr auto kTransportNames = enum_table<Transport::tcp, Transport::rtu>({"tcp", "rtu"});
+  friend constexpr const auto& names_of(Transport) noexcept { return kTransportNames; }
   Transport transport = Transport::tcp;
   std::string host = "127.0.0.1";  ///< TCP: address or host name of the module
   int port = 502;                  ///< TCP port

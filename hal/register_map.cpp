@@ -17,12 +17,6 @@ std::int64_t RegisterFormat::max_counts() const noexcept {
   return is_signed ? std::numeric_limits<std::int16_t>::max() : std::numeric_limits<std::uint16_t>::max();
 }
 
-std::optional<WordOrder> parse_word_order(std::string_view name) noexcept {
-  if (name == "high_first") return WordOrder::high_first;
-  if (name == "low_first") return WordOrder::low_first;
-  return std::nullopt;
-}
-
 std::int64_t decode_counts(const std::uint16_t* regs, const RegisterFormat& f) noexcept {
   if (f.width_bits != 32) {
     return f.is_signed ? static_cast<std::int64_t>(static_cast<std::int16_t>(regs[0])) : regs[0];

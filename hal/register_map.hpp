@@ -7,6 +7,8 @@
 #include <optional>
 #include <string_view>
 
+#include "control/enum_table.hpp"
+
 namespace pvcgel::hal {
 
 /// Order of the two 16-bit registers of a 32-bit value.
@@ -14,6 +16,9 @@ enum class WordOrder : std::uint8_t {
   high_first,  ///< register N holds bits 31..16 (Modbus "big-endian", most modules)
   low_first,   ///< register N holds bits 15..0 ("word-swapped")
 };
+inline constexpr auto kWordOrderNames = enum_table<WordOrder::high_first, WordOrder::low_first>({"high_first", "low_first"});
+constexpr const auto& names_of(WordOrder) noexcept { return kWordOrderNames; }
+constexpr std::string_view to_string(WordOrder w) noexcept { return kWordOrderNames.to_string(w); }
 
 /// How an integer is laid out in one or two consecutive registers.
 struct RegisterFormat {
@@ -29,8 +34,6 @@ struct RegisterFormat {
   [[nodiscard]] std::int64_t max_counts() const noexcept;
 };
 
-/// Parses "high_first" / "low_first".
-std::optional<WordOrder> parse_word_order(std::string_view name) noexcept;
 
 /// The integer held by `regs[0..register_count)`.
 std::int64_t decode_counts(const std::uint16_t* regs, const RegisterFormat& format) noexcept;

@@ -5,20 +5,6 @@
 
 namespace pvcgel::hal {
 
-namespace {
-constexpr std::string_view kFaultNames[] = {"none", "sensor_nan", "sensor_stuck", "sensor_out_of_range",
-                                            "sensor_dropout", "amplifier_fault", "write_failed",
-                                            "write_timeout", "hv_enable_failed"};
-}
-
-std::optional<SimFault> parse_sim_fault(std::string_view name) noexcept {
-  for (size_t i = 0; i < std::size(kFaultNames); ++i)
-    if (kFaultNames[i] == name) return static_cast<SimFault>(i);
-  return std::nullopt;
-}
-
-std::string_view to_string(SimFault f) noexcept { return kFaultNames[static_cast<size_t>(f)]; }
-
 SimBackend::SimBackend(const control::SimRigConfig& config) : rig_(config) { rig_.reset_steady_state(0.0); }
 
 HalStatus SimBackend::read_displacement(double& y) noexcept {

@@ -25,10 +25,12 @@ enum class SimFault : std::uint8_t {
   hv_enable_failed,     ///< enabling high voltage fails (it stays off)
 };
 
-/// Parses "sensor_nan", ... ; empty when unknown.
-std::optional<SimFault> parse_sim_fault(std::string_view name) noexcept;
-/// Name of a fault.
-std::string_view to_string(SimFault f) noexcept;
+inline constexpr auto kSimFaultNames = enum_table<SimFault::none, SimFault::hv_enable_failed>(
+    {"none", "sensor_nan", "sensor_stuck", "sensor_out_of_range", "sensor_dropout", "amplifier_fault", "write_failed",
+     "write_timeout", "hv_enable_failed"});
+constexpr const auto& names_of(SimFault) noexcept { return kSimFaultNames; }
+/// Name of a fault ("sensor_nan", ...); parse_enum<SimFault> is the inverse.
+constexpr std::string_view to_string(SimFault f) noexcept { return kSimFaultNames.to_string(f); }
 
 /// Wraps control::SimulatedRig. Time advances one sample per write_voltage().
 /// With high voltage disabled the amplifier output is 0 V whatever is written.

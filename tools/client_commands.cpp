@@ -13,7 +13,9 @@
 
 #include "control/controller.hpp"
 #include "daemon/control_loop.hpp"
+#include "daemon/dds/dds_messages.hpp"
 #include "tools/dds_client.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -21,17 +23,23 @@ namespace {
 
 using daemon::CommandKind;
 using daemon::LoopState;
+using SegmentKind = daemon::SetpointSegment::Kind;
 
 volatile std::sig_atomic_t g_interrupted = 0;
 
 std::string state_line(const pvcgel_v1_Status& s) {
+  // Decoded one by one, in the order printed: the first unknown value is the one named.
+  const auto state = state_of(s);
+  const auto fault = fault_of(s);
+  const auto mode = dds::checked_from_wire<control::ControllerMode>(s.mode, "Status.mode");
+  const auto target = dds::checked_from_wire<daemon::LoopTarget>(s.target, "Status.target");
+  const bool faulted = fault != daemon::FaultReason::none;
   char buf[400];
-  std::snprintf(buf, sizeof buf, "%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
-                daemon::to_string(static_cast<daemon::LoopState>(s.state)).data(), s.fault ? " (fault " : "",
-                s.fault ? (std::string(daemon::to_string(static_cast<daemon::FaultReason>(s.fault))) + ")").c_str() : "",
-                control::to_string(static_cast<control::ControllerMode>(s.mode)).data(),
-                s.target ? "voltage" : "displacement", s.high_voltage ? "on" : "off", s.t_s,
-                s.queued_until_s > s.t_s ? (std::to_string(s.queued_until_s) + " s").c_str() : "(nothing)");
+  std::snprintf(buf, sizeof buf, "%s%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
+                daemon::to_string(state).data(), faulted ? " (fault " : "", faulted ? daemon::to_string(fault).data() : "",
+                faulted ? ")" : "", control::to_string(mode).data(), daemon::to_string(target).data(),
+                s.high_voltage ? "on" : "off", s.t_s,
+                s.queued_until_s > s.t_s ? format("%.3f s", s.queued_until_s).c_str() : "(nothing)");
   return buf;
 }
 
@@ -49,12 +57,17 @@ void print_status(const pvcgel_v1_Status& s) {
               static_cast<unsigned long long>(s.rejects_total));
   std::string by;
   for (std::size_t i = 1; i < std::size(s.rejects_by_reason); ++i)
-    if (s.rejects_by_reason[i] > 0)
-      by += (by.empty() ? "" : ", ") + std::string(daemon::to_string(static_cast<daemon::RejectReason>(i))) + " " +
-            std::to_string(s.rejects_by_reason[i]);
-  if (!by.empty()) std::printf(" (%s); last: %s: %s", by.c_str(),
-                               daemon::to_string(static_cast<daemon::RejectReason>(s.last_reject_reason)).data(),
-                               s.last_reject_detail);
+    if (s.rejects_by_reason[i] > 0) {
+      // A counter this client has no name for (a newer daemon) is shown by its number, not dropped.
+      const auto reason = from_wire<daemon::RejectReason>(static_cast<std::uint8_t>(i));
+      by += (by.empty() ? "" : ", ") + (reason ? std::string(daemon::to_string(*reason)) : "reason " + std::to_string(i)) +
+            " " + std::to_string(s.rejects_by_reason[i]);
+    }
+  if (!by.empty())
+    std::printf(" (%s); last: %s: %s", by.c_str(),
+                daemon::to_string(dds::checked_from_wire<daemon::RejectReason>(s.last_reject_reason, "Status.last_reject_reason"))
+                    .data(),
+                s.last_reject_detail);
   std::printf("\n");
 }
 
@@ -92,16 +105,16 @@ bool reached(CommandKind kind, LoopState s) {
 }
 
 void ensure_running(DdsClient& c) {
-  const auto state = static_cast<daemon::LoopState>(c.status().state);
+  const auto state = state_of(c.status());
   if (state == daemon::LoopState::running) return;
   if (state == daemon::LoopState::disabled) c.command(CommandKind::arm);
   c.command(CommandKind::start);
 }
 
-pvcgel_v1_Trajectory make_trajectory(const SendArgs& a, std::uint8_t kind, std::vector<double>& values) {
+pvcgel_v1_Trajectory make_trajectory(const SendArgs& a, SegmentKind kind, std::vector<double>& values) {
   pvcgel_v1_Trajectory t{};
-  t.target = a.voltage ? 1 : 0;
-  t.kind = kind;
+  t.target = to_wire(a.voltage ? daemon::LoopTarget::voltage : daemon::LoopTarget::displacement);
+  t.kind = to_wire(kind);
   t.timing = a.append ? 1 : 0;
   t.start_time_s = a.at_s;
   t.duration_s = a.duration_s;
@@ -145,8 +158,8 @@ std::vector<double> read_setpoint_csv(const std::string& path, double& period_s)
   period_s = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
   for (std::size_t i = 1; i < t.size(); ++i)
     if (std::abs(t[i] - t[i - 1] - period_s) > 1e-3 * period_s + 1e-9)
-      throw std::runtime_error(path + ":" + std::to_string(i + 1) + ": sample spacing " + std::to_string(t[i] - t[i - 1]) +
-                               " s differs from the mean " + std::to_string(period_s) + " s (uniform sampling required)");
+      throw std::runtime_error(path + ":" + std::to_string(i + 1) + ": sample spacing " + format("%g", t[i] - t[i - 1]) +
+                               " s differs from the mean " + format("%g", period_s) + " s (uniform sampling required)");
   return r;
 }
 
@@ -157,31 +170,31 @@ void send(DdsClient& c, SendArgs a) {
   const auto need = [&](std::size_t n, const char* form) {
     if (v.size() != n) throw std::runtime_error("send " + a.kind + " takes " + form);
   };
-  std::uint8_t kind = 1;
+  SegmentKind kind = SegmentKind::hold;
   if (a.kind == "hold") {
     need(1, "LEVEL");
   } else if (a.kind == "ramp") {
     need(2, "FROM TO (and --duration S)");
-    kind = 2;
+    kind = SegmentKind::ramp;
   } else if (a.kind == "sine") {
     if (v.size() == 3) v.push_back(0.0);
     need(4, "OFFSET AMPLITUDE FREQ_HZ [PHASE_RAD]");
-    kind = 3;
+    kind = SegmentKind::sine;
   } else if (a.kind == "multiharmonic") {
     // OFFSET A1 F1 A2 F2 ...: phases 0.
     if (v.size() < 3 || v.size() % 2 == 0) throw std::runtime_error("send multiharmonic takes OFFSET A1 F1 [A2 F2 ...]");
     std::vector<double> w{v[0]};
     for (std::size_t i = 1; i + 1 < v.size(); i += 2) w.insert(w.end(), {v[i], v[i + 1], 0.0});
     v = w;
-    kind = 4;
+    kind = SegmentKind::multisine;
   } else if (a.kind == "paper") {
     // The paper's references (Section V): y_r1 = 100 + 25 sin(2 pi f t), y_r2 the multi-harmonic sum.
     if (a.csv == "0.1Hz" || a.csv == "0.5Hz" || a.csv == "1Hz") {
       v = {100.0, 25.0, std::stod(a.csv), 0.0};
-      kind = 3;
+      kind = SegmentKind::sine;
     } else if (a.csv == "multi") {
       v = {96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0};
-      kind = 4;
+      kind = SegmentKind::multisine;
     } else {
       throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + a.csv + "'");
     }
@@ -190,8 +203,8 @@ void send(DdsClient& c, SendArgs a) {
     const std::vector<double> all = read_setpoint_csv(a.csv, period);
     const double loop_period = c.status().period_s;
     if (period < loop_period * 0.999)
-      throw std::runtime_error(a.csv + ": sample period " + std::to_string(period) + " s is shorter than the loop's " +
-                               std::to_string(loop_period) + " s");
+      throw std::runtime_error(a.csv + ": sample period " + format("%g", period) + " s is shorter than the loop's " +
+                               format("%g", loop_period) + " s");
     constexpr std::size_t kChunk = 1024;
     std::size_t sent = 0;
     bool first = true;
@@ -202,7 +215,7 @@ void send(DdsClient& c, SendArgs a) {
       piece.append = !first || a.append;
       piece.blend_s = first ? a.blend_s : 0.0;
       piece.at_s = first ? a.at_s : -1.0;
-      auto t = make_trajectory(piece, 0, chunk);
+      auto t = make_trajectory(piece, SegmentKind::samples, chunk);
       t.period_s = period;
       const Reply r = c.send(t, false);
       if (r.reason == daemon::RejectReason::busy) {
@@ -244,7 +257,7 @@ void watch(DdsClient& c, double duration_s) {
       last = t;
       last_seq = t.seq;
       have = true;
-      if (t.state == static_cast<uint8_t>(daemon::LoopState::running) && std::isfinite(t.e_um)) {
+      if (from_wire<LoopState>(t.state) == LoopState::running && std::isfinite(t.e_um)) {
         err_sq += t.e_um * t.e_um;
         ++n;
       }
@@ -283,7 +296,7 @@ void add_client_commands(CLI::App& app) {
       run_client([&] {
         DdsClient c(*opt);
         c.connect();
-        if (kind == CommandKind::start && static_cast<LoopState>(c.status().state) == LoopState::running) {
+        if (kind == CommandKind::start && state_of(c.status()) == LoopState::running) {
           std::printf("rig %s: already RUNNING; start not sent\n", opt->rig.c_str());
           return;
         }
@@ -293,7 +306,7 @@ void add_client_commands(CLI::App& app) {
           c.command(kind);
         }
         // Print the state the command led to, not the Status that was current when the reply came.
-        const auto& s = c.wait_status([kind](const pvcgel_v1_Status& st) { return reached(kind, static_cast<LoopState>(st.state)); },
+        const auto& s = c.wait_status([kind](const pvcgel_v1_Status& st) { return reached(kind, state_of(st)); },
                                       opt->wait_s);
         std::printf("rig %s: %s accepted; now %s\n", opt->rig.c_str(), name, state_line(s).c_str());
       });
@@ -341,7 +354,7 @@ void add_client_commands(CLI::App& app) {
       if (!m) throw CLI::ValidationError("NAME", "'" + *name + "' is not pid, inverse_pid, inverse_pid_dob or inverse_pid_dob_ff");
       run_client([&] {
         DdsClient c(*opt);
-        c.command(CommandKind::set_mode, static_cast<std::uint8_t>(*m));
+        c.command(CommandKind::set_mode, to_wire(*m));
         std::printf("rig %s: mode %s accepted\n", opt->rig.c_str(), name->c_str());
       });
     });
@@ -352,11 +365,14 @@ void add_client_commands(CLI::App& app) {
     auto* cmd = app.add_subcommand("target", "Closed-loop displacement setpoints or open-loop voltage setpoints "
                                              "(identification); not while RUNNING");
     add_client_options(*cmd, *opt);
-    cmd->add_option("TARGET", *name, "displacement | voltage")->required()->check(CLI::IsMember({"displacement", "voltage"}));
+    cmd->add_option("TARGET", *name, "displacement | voltage")
+        ->required()
+        ->check(CLI::IsMember(std::vector<std::string>(daemon::kLoopTargetNames.names().begin(),
+                                                       daemon::kLoopTargetNames.names().end())));
     cmd->callback([opt, name] {
       run_client([&] {
         DdsClient c(*opt);
-        c.command(CommandKind::set_target, *name == "voltage" ? 1 : 0);
+        c.command(CommandKind::set_target, to_wire(*parse_enum<daemon::LoopTarget>(*name)));  // checked by IsMember
         std::printf("rig %s: target %s accepted\n", opt->rig.c_str(), name->c_str());
       });
     });

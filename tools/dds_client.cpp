@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "daemon/dds/dds_messages.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -25,10 +26,17 @@ bool same_guid(const dds_guid_t& a, const dds_guid_t& b) { return std::memcmp(a.
 
 }  // namespace
 
+daemon::LoopState state_of(const pvcgel_v1_Status& s) {
+  return dds::checked_from_wire<daemon::LoopState>(s.state, "Status.state");
+}
+daemon::FaultReason fault_of(const pvcgel_v1_Status& s) {
+  return dds::checked_from_wire<daemon::FaultReason>(s.fault, "Status.fault");
+}
+
 NoDaemon no_daemon_error(const std::string& rig, int domain, double wait_s, const std::vector<std::string>& rigs_seen,
                          const std::string& also_needs) {
   if (rigs_seen.empty())
-    return NoDaemon("no daemon found within " + std::to_string(wait_s) + " s on domain " + std::to_string(domain) +
+    return NoDaemon("no daemon found within " + format("%g", wait_s) + " s on domain " + std::to_string(domain) +
                     " (is pvcgeld running with [dds] enabled" + also_needs + ", on the same DDS configuration?)");
   std::string seen;
   for (const auto& r : rigs_seen) seen += (seen.empty() ? "" : ", ") + r;
@@ -137,7 +145,7 @@ const pvcgel_v1_Status& DdsClient::connect() {
            (telemetry_reader_.get() == 0 || matched_daemon(telemetry_reader_.get(), false)))) {
     if (Clock::now() > deadline)
       throw std::runtime_error("found rig '" + opt_.rig + "' but its command endpoints did not match within " +
-                               std::to_string(opt_.wait_s) + " s (QoS or version mismatch?)");
+                               format("%g", opt_.wait_s) + " s (QoS or version mismatch?)");
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   return *status_;
@@ -182,7 +190,7 @@ void DdsClient::ensure_writers() {
   while (!(matched_daemon(command_writer_.get(), true) && matched_daemon(trajectory_writer_.get(), true))) {
     if (Clock::now() > deadline)
       throw std::runtime_error("rig '" + opt_.rig + "' did not accept our command endpoints within " +
-                               std::to_string(opt_.wait_s) + " s (QoS mismatch, or not permitted by DDS Security?)");
+                               format("%g", opt_.wait_s) + " s (QoS mismatch, or not permitted by DDS Security?)");
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
 }
@@ -199,7 +207,7 @@ std::uint64_t DdsClient::publish_command(daemon::CommandKind kind, std::uint8_t 
   dds::copy_bounded(c.rig_id, opt_.rig);
   dds::copy_bounded(c.client_id, client_id_);
   c.command_seq = seq != 0 ? seq : ++next_seq_;
-  c.kind = static_cast<uint8_t>(kind);
+  c.kind = to_wire(kind);
   c.argument = argument;
   if (const auto rc = dds_write(command_writer_.get(), &c); rc < 0)
     throw std::runtime_error(std::string("DDS write of a command failed: ") + dds_strretcode(rc));
@@ -249,7 +257,7 @@ Reply DdsClient::wait_reply(std::uint64_t seq, bool is_trajectory, const char* w
     auto replies = take_replies();
     for (auto it = replies.begin(); it != replies.end(); ++it) {
       if (it->seq != seq || it->is_trajectory != is_trajectory) continue;
-      Reply r{it->accepted, static_cast<daemon::RejectReason>(it->reason), it->detail};
+      Reply r{it->accepted, dds::checked_from_wire<daemon::RejectReason>(it->reason, "CommandReply.reason"), it->detail};
       replies.erase(it);
       stray_replies_.insert(stray_replies_.end(), replies.begin(), replies.end());
       if (!r.accepted && throw_on_reject)
@@ -263,16 +271,14 @@ Reply DdsClient::wait_reply(std::uint64_t seq, bool is_trajectory, const char* w
     if (stray_replies_.size() > 256) stray_replies_.erase(stray_replies_.begin(), stray_replies_.begin() + 128);
     if (Clock::now() > deadline)
       throw std::runtime_error(std::string("no reply to the ") + what + " from rig '" + opt_.rig + "' within " +
-                               std::to_string(opt_.wait_s) + " s (daemon busy or gone?)");
+                               format("%g", opt_.wait_s) + " s (daemon busy or gone?)");
     std::this_thread::sleep_for(std::chrono::microseconds(200));
   }
 }
 
 Reply DdsClient::command(daemon::CommandKind kind, std::uint8_t argument, bool throw_on_reject) {
   if (!status_) connect();
-  static constexpr const char* kNames[] = {"?", "arm", "start", "stop", "reset", "mode", "target", "clear"};
-  const auto k = static_cast<std::size_t>(kind);
-  const std::string what = std::string("command '") + (k < std::size(kNames) ? kNames[k] : "?") + "'";
+  const std::string what = "command '" + std::string(daemon::to_string(kind)) + "'";
   const std::uint64_t seq = publish_command(kind, argument);
   return wait_reply(seq, false, what.c_str(), throw_on_reject, [&] { publish_command(kind, argument, seq); });
 }

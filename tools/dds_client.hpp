@@ -14,6 +14,7 @@
 
 #include "daemon/dds/dds_participant.hpp"
 #include "daemon/input_validation.hpp"
+#include "daemon/loop_state.hpp"
 #include "pvcgel_v1.h"
 
 namespace pvcgel::tools {
@@ -34,6 +35,11 @@ void add_client_options(CLI::App& cmd, ClientOptions& o);
 /// Joins `o.domain` with `o.dds_config` (required: the default configuration
 /// would discover on every interface). @throws std::runtime_error saying what to pass.
 dds::Entity make_client_participant(const ClientOptions& o);
+
+/// The loop state and fault a received Status reports.
+/// @throws std::runtime_error naming the field and the value when it is not one this client knows.
+daemon::LoopState state_of(const pvcgel_v1_Status& s);
+daemon::FaultReason fault_of(const pvcgel_v1_Status& s);
 
 /// The daemon's answer to one command or chunk.
 struct Reply {

@@ -210,21 +210,22 @@ std::string model_toml(const HammersteinModel& m, const std::string& comment) {
   return s;
 }
 
-void write_sine_recording(const fs::path& path, const SineRecord& r,
-                          const std::vector<std::pair<std::string, std::string>>& header) {
-  if (path.has_parent_path()) fs::create_directories(path.parent_path());
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) throw std::runtime_error("cannot write recording '" + path.string() + "'");
-  std::fprintf(f, "# pvcgel-recording: 1\n");
-  for (const auto& [k, v] : header) std::fprintf(f, "# %s: %s\n", k.c_str(), v.c_str());
-  std::fprintf(f, "# convention: row k holds y_um measured at the start of cycle k (t_s) and the u_V then "
-                  "applied and held until cycle k+1 (zero-order hold)\n");
-  std::fprintf(f, "t_s,u_V,y_um,r_um,e_um,d_hat,mode,state,fault,hv,latency_us\n");
-  for (size_t k = 0; k < r.t_s.size(); ++k)
-    std::fprintf(f, "%.4f,%.6f,%.4f,nan,nan,0,open_loop,RUNNING,none,1,0.0\n", r.t_s[k], r.u_V[k], r.y_um[k]);
-  const bool ok = std::fflush(f) == 0;
-  std::fclose(f);
-  if (!ok) throw std::runtime_error("writing recording '" + path.string() + "' failed");
+void write_sine_recording(const fs::path& path, const SineRecord& r, const daemon::RecordingHeader& header) {
+  // The daemon's writer: an open-loop experiment is what the loop records while it plays voltage setpoints.
+  daemon::Recorder out(path.string(), header);
+  daemon::CycleRecord row;
+  row.r_um = row.e_um = NAN;
+  row.state = daemon::LoopState::running;
+  row.target = daemon::LoopTarget::voltage;
+  row.high_voltage = true;
+  for (size_t k = 0; k < r.t_s.size(); ++k) {
+    row.seq = k;
+    row.t_s = r.t_s[k];
+    row.u_V = r.u_V[k];
+    row.y_um = r.y_um[k];
+    out.write(row);
+  }
+  out.finish();
 }
 
 namespace {
@@ -252,7 +253,7 @@ control::SimRigConfig sim_rig_config(const IdentArgs& a) {
   return cfg;
 }
 
-std::vector<std::pair<std::string, std::string>> sim_recording_header(const SinePoint& p, double Ts) {
+daemon::RecordingHeader sim_recording_header(const SinePoint& p, double Ts) {
   return {{"rate_hz", format("%.0f", 1.0 / Ts)},
           {"hal_backend", "sim"},
           {"trajectory", format("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz)},

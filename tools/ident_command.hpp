@@ -16,6 +16,7 @@
 #include "control/identification/excitation_plan.hpp"
 #include "control/identification/identification.hpp"
 #include "control/identification/sine_experiment.hpp"
+#include "daemon/recorder.hpp"
 
 namespace pvcgel::tools {
 
@@ -66,10 +67,10 @@ IdentOutcome run_ident(const IdentArgs& args);
 /// The `[model]` table the daemon reads (`poly`, `G_num`, `G_den`), with `#` comment lines first.
 std::string model_toml(const control::HammersteinModel& model, const std::string& comment);
 
-/// Writes an experiment in the daemon's recording format (same header style and
-/// columns as daemon/recorder.cpp; r_um and e_um are nan: there is no reference).
+/// Writes an experiment as a recording, with the daemon's writer (daemon/recorder.hpp):
+/// mode open_loop, state RUNNING; r_um and e_um are nan (there is no reference).
 void write_sine_recording(const std::filesystem::path& path, const control::identification::SineRecord& record,
-                          const std::vector<std::pair<std::string, std::string>>& header);
+                          const daemon::RecordingHeader& header);
 
 /// Adds `ident` to the app.
 void add_ident_command(CLI::App& app);

@@ -7,6 +7,8 @@
 
 #include "control/identification/excitation_plan.hpp"
 #include "daemon/control_loop.hpp"
+#include "daemon/dds/dds_messages.hpp"
+#include "tools/text_output.hpp"
 
 namespace pvcgel::tools {
 
@@ -19,15 +21,15 @@ using daemon::LoopState;
 
 namespace {
 
-LoopState state_of(DdsClient& c) { return static_cast<LoopState>(c.status().state); }
+LoopState rig_state(DdsClient& c) { return state_of(c.status()); }
 
 void wait_for_state(DdsClient& c, LoopState want, double timeout_s) {
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (state_of(c) != want) {
+  while (rig_state(c) != want) {
     if (std::chrono::steady_clock::now() > end)
       throw std::runtime_error("rig '" + c.options().rig + "' did not reach " + std::string(daemon::to_string(want)) +
-                               " within " + std::to_string(timeout_s) + " s (now " +
-                               std::string(daemon::to_string(state_of(c))) + ")");
+                               " within " + format("%g", timeout_s) + " s (now " +
+                               std::string(daemon::to_string(rig_state(c))) + ")");
     c.take_telemetry(1 << 16);  // keep the reliable reader drained
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
@@ -35,10 +37,11 @@ void wait_for_state(DdsClient& c, LoopState want, double timeout_s) {
 
 /// Back to a safe rest: ramp to 0 V, DISABLED, displacement setpoints.
 void leave_safe(DdsClient& c) {
-  const auto s = state_of(c);
+  const auto s = rig_state(c);
   if (s == LoopState::armed || s == LoopState::running) c.command(CommandKind::stop);
   if (s != LoopState::fault) wait_for_state(c, LoopState::disabled, 10.0);
-  if (c.status().target != 0) c.command(CommandKind::set_target, 0, false);
+  if (dds::checked_from_wire<daemon::LoopTarget>(c.status().target, "Status.target") != daemon::LoopTarget::displacement)
+    c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::displacement), false);
 }
 
 /// One sine experiment: the segment is sent, and the telemetry of the cycles it
@@ -46,9 +49,9 @@ void leave_safe(DdsClient& c) {
 SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
   std::vector<double> v{p.bias_V, p.amplitude_V, p.frequency_Hz, 0.0};
   pvcgel_v1_Trajectory t{};
-  t.target = 1;
-  t.kind = 3;
-  t.timing = 0;
+  t.target = to_wire(daemon::LoopTarget::voltage);
+  t.kind = to_wire(daemon::SetpointSegment::Kind::sine);
+  t.timing = 0;  // replace what is queued (the wire's 0), starting now
   t.start_time_s = -1;
   // The blend from the previous voltage ends well inside the settling time, which is not analysed.
   t.blend_s = std::min(1.0, 0.5 * p.settle_s);
@@ -68,10 +71,13 @@ SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
     for (const auto& s : c.take_telemetry(1 << 16)) {
       any = true;
       if (s.chunk_seq != seq || r.t_s.size() >= rows) continue;
-      if (s.state != static_cast<uint8_t>(LoopState::running))
-        throw std::runtime_error("the rig left RUNNING (" +
-                                 std::string(daemon::to_string(static_cast<LoopState>(s.state))) +
-                                 (s.fault ? ", fault " + std::string(daemon::to_string(static_cast<daemon::FaultReason>(s.fault))) : "") + ")");
+      const auto state = dds::checked_from_wire<LoopState>(s.state, "Telemetry.state");
+      if (state != LoopState::running) {
+        const auto fault = dds::checked_from_wire<daemon::FaultReason>(s.fault, "Telemetry.fault");
+        throw std::runtime_error("the rig left RUNNING (" + std::string(daemon::to_string(state)) +
+                                 (fault != daemon::FaultReason::none ? ", fault " + std::string(daemon::to_string(fault)) : "") +
+                                 ")");
+      }
       if (std::isnan(t0)) t0 = s.t_s;
       else if (s.seq != last_seq + 1)
         throw std::runtime_error("telemetry lost " + std::to_string(s.seq - last_seq - 1) + " cycles (sequence gap)");
@@ -82,8 +88,10 @@ SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
     }
     for (const auto& reply : c.take_replies())
       if (reply.seq == seq && !reply.accepted)
-        throw std::runtime_error("the rig refused the sine: " + std::string(daemon::to_string(static_cast<daemon::RejectReason>(reply.reason))) +
-                                 ": " + reply.detail);
+        throw std::runtime_error(
+            "the rig refused the sine: " +
+            std::string(daemon::to_string(dds::checked_from_wire<daemon::RejectReason>(reply.reason, "CommandReply.reason"))) +
+            ": " + reply.detail);
     if (!any) {
       if (std::chrono::steady_clock::now() - last_progress > std::chrono::seconds(5))
         throw std::runtime_error("no telemetry for 5 s (daemon gone?)");
@@ -112,9 +120,9 @@ std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const 
                              " (identification records lossless telemetry: the daemon needs [dds] reliable_telemetry = true)");
   }
   const double Ts = c.status().period_s;
-  if (state_of(c) == LoopState::fault)
+  if (rig_state(c) == LoopState::fault)
     throw std::runtime_error("rig '" + rig.rig + "' is in FAULT (" +
-                             std::string(daemon::to_string(static_cast<daemon::FaultReason>(c.status().fault))) +
+                             std::string(daemon::to_string(fault_of(c.status()))) +
                              "): clear it with `pvcgel reset` first");
   const auto plan = ExcitationPlan::from_grid(a.grid, Ts);
   std::vector<SinePoint> validation;
@@ -129,7 +137,7 @@ std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const 
                validation.size(), rig.rig.c_str(), total_s);
 
   leave_safe(c);
-  c.command(CommandKind::set_target, 1);
+  c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::voltage));
   try {
     c.command(CommandKind::arm);
     c.command(CommandKind::start);

@@ -13,6 +13,7 @@
 #include "daemon/dds/dds_participant.hpp"
 #include "daemon/recorder.hpp"
 #include "tools/dds_client.hpp"
+#include "tools/text_output.hpp"
 #include "pvcgel_v1.h"
 
 namespace pvcgel::tools {
@@ -63,8 +64,9 @@ int record(const RecordArgs& a) {
       }
       if (!recorder) {
         recorder = std::make_unique<daemon::Recorder>(
-            a.out, std::vector<std::pair<std::string, std::string>>{{"source", "dds"}, {"rig_id", a.rig},
-                                                                     {"domain", std::to_string(a.domain)}});
+            a.out, daemon::RecordingHeader{{"source", "dds"}, {"rig_id", a.rig}, {"domain", std::to_string(a.domain)}});
+        if (!recorder->created_directory().empty())
+          std::fprintf(stderr, "pvcgel record: created directory %s\n", recorder->created_directory().c_str());
         first_t = t->t_s;
         std::fprintf(stderr, "pvcgel record: receiving rig '%s' (from cycle %llu)\n", a.rig.c_str(),
                      static_cast<unsigned long long>(t->seq));
@@ -80,8 +82,8 @@ int record(const RecordArgs& a) {
       if (last_t - first_t >= a.duration) break;
       if (std::chrono::steady_clock::now() - last_sample > std::chrono::duration<double>(a.wait)) {
         recorder->finish();  // keep what arrived
-        throw std::runtime_error("telemetry stopped after " + std::to_string(last_t - first_t) + " s of " +
-                                 std::to_string(a.duration) + " s (daemon gone?); " + std::to_string(rows) +
+        throw std::runtime_error("telemetry stopped after " + format("%.3f", last_t - first_t) + " s of " +
+                                 format("%g", a.duration) + " s (daemon gone?); " + std::to_string(rows) +
                                  " rows kept in " + a.out);
       }
     } else if (std::chrono::steady_clock::now() - start > std::chrono::duration<double>(a.wait)) {

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <tuple>
 
+#include "daemon/recorder.hpp"
+
 namespace pvcgel::tools {
 
 namespace {
@@ -83,7 +85,7 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
     }
     if (names.empty()) {
       names = split(line);
-      for (const char* required : {"t_s", "u_V", "y_um"})
+      for (const char* required : daemon::kRecordingRequiredColumns)
         if (std::find(names.begin(), names.end(), required) == names.end())
           throw std::runtime_error(path + ":" + std::to_string(lineno) + ": header lacks column '" + required +
                                    "' (need at least t_s,u_V,y_um)");
@@ -110,14 +112,14 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
       for (auto& row : cells) t.push_back(row[c]);
     }
   }
-  for (const char* required : {"t_s", "u_V", "y_um"})
+  for (const char* required : daemon::kRecordingRequiredColumns)
     if (!rec.numeric.count(required)) throw std::runtime_error(path + ": column '" + required + "' is not numeric");
 
   // Drop rows whose core values are not finite, counting them.
   const auto& t0 = rec.numeric["t_s"];
   std::vector<bool> keep(t0.size(), true);
   for (size_t r = 0; r < t0.size(); ++r) {
-    for (const char* k : {"t_s", "u_V", "y_um"})
+    for (const char* k : daemon::kRecordingRequiredColumns)
       if (!std::isfinite(rec.numeric[k][r])) keep[r] = false;
     if (!keep[r]) ++rec.invalid_rows;
     if (keep_invalid_rows && std::isfinite(t0[r])) keep[r] = true;

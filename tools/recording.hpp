@@ -1,6 +1,6 @@
 #pragma once
 /// @file
-/// Reading the daemon's recording format (see daemon/recorder.hpp).
+/// Reading the recording format (defined once, with its writer, in daemon/recorder.hpp).
 
 #include <map>
 #include <string>

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <span>
+#include <stdexcept>
 #include <string>
 
 #include "daemon/control_loop.hpp"
@@ -17,6 +18,21 @@ namespace pvcgel::dds {
 template <std::size_t N>
 void copy_bounded(char (&dst)[N], const std::string& src) noexcept {
   std::snprintf(dst, N, "%s", src.c_str());
+}
+
+/// The enumerator a received octet stands for, for clients reading the
+/// daemon's messages. @throws std::runtime_error naming the field, the value
+/// and the values known here (a daemon of another version, or a corrupt
+/// message): an unknown value is an error, never a cast or an array index.
+template <typename E>
+E checked_from_wire(std::uint8_t value, const char* field) {
+  if (const auto e = from_wire<E>(value)) return *e;
+  const auto& table = names_of(E{});
+  std::string known;
+  for (std::size_t i = 0; i < table.size(); ++i)
+    known += (i ? ", " : "") + std::to_string(to_wire(table.first()) + i) + " " + std::string(table.names()[i]);
+  throw std::runtime_error(std::string(field) + " = " + std::to_string(value) + " is not a value this program knows (" +
+                           known + "): a daemon of another version, or a corrupt message");
 }
 
 /// A received Trajectory as the validator sees it (views into `t`, which must outlive the result).
@@ -48,18 +64,19 @@ inline pvcgel_v1_Telemetry to_telemetry(const daemon::CycleRecord& r, const std:
   t.e_um = r.e_um;
   t.d_hat = r.d_hat;
   t.latency_us = r.latency_us;
-  t.mode = static_cast<uint8_t>(r.mode);
-  t.state = static_cast<uint8_t>(r.state);
-  t.fault = static_cast<uint8_t>(r.fault);
+  t.mode = to_wire(r.mode);
+  t.state = to_wire(r.state);
+  t.fault = to_wire(r.fault);
   t.high_voltage = r.high_voltage;
-  t.target = static_cast<uint8_t>(r.target);
+  t.target = to_wire(r.target);
   t.chunk_seq = r.chunk_seq;
   t.stamp_ns = r.stamp_ns;
   return t;
 }
 
 /// Received Telemetry as a loop record (the inverse of to_telemetry).
-inline daemon::CycleRecord to_cycle_record(const pvcgel_v1_Telemetry& t) noexcept {
+/// @throws std::runtime_error naming the field of an unknown mode, state, fault or target.
+inline daemon::CycleRecord to_cycle_record(const pvcgel_v1_Telemetry& t) {
   daemon::CycleRecord r;
   r.seq = t.seq;
   r.t_s = t.t_s;
@@ -69,11 +86,11 @@ inline daemon::CycleRecord to_cycle_record(const pvcgel_v1_Telemetry& t) noexcep
   r.e_um = t.e_um;
   r.d_hat = t.d_hat;
   r.latency_us = t.latency_us;
-  r.mode = static_cast<control::ControllerMode>(t.mode);
-  r.state = static_cast<daemon::LoopState>(t.state);
-  r.fault = static_cast<daemon::FaultReason>(t.fault);
+  r.mode = checked_from_wire<control::ControllerMode>(t.mode, "Telemetry.mode");
+  r.state = checked_from_wire<daemon::LoopState>(t.state, "Telemetry.state");
+  r.fault = checked_from_wire<daemon::FaultReason>(t.fault, "Telemetry.fault");
   r.high_voltage = t.high_voltage;
-  r.target = static_cast<daemon::LoopTarget>(t.target);
+  r.target = checked_from_wire<daemon::LoopTarget>(t.target, "Telemetry.target");
   r.chunk_seq = t.chunk_seq;
   r.stamp_ns = t.stamp_ns;
   return r;

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "support/subprocess.hpp"
+#include "daemon/dds/dds_messages.hpp"
 #include "tools/dds_client.hpp"
 #include "tools/recording.hpp"
 
@@ -227,6 +228,36 @@ TEST(DdsE2E, OpenLoopVoltageModeDrivesTheAmplifier) {
   EXPECT_EQ(running.exit_code, 4) << "not while RUNNING";
   EXPECT_NE(running.err.find("illegal_in_state"), std::string::npos) << running.err;
   EXPECT_EQ(daemon.stop().exit_code, 0);
+}
+
+// A participant that claims to be a daemon but publishes a state and a fault no
+// pvcgel knows (a newer daemon, or a corrupt one): the client names the field
+// and the value and fails (exit 1), instead of indexing a name table with them.
+TEST(DdsE2E, AStatusWithAnUnknownStateIsReportedClearlyByTheClient) {
+  dds::DdsSettings s;
+  s.domain = kDomain;
+  s.config_path = kDdsConfig;
+  s.rig_id = "alien";
+  const auto participant = dds::make_participant(s);
+  const auto status_topic = dds::make_topic(participant.get(), dds::Topic::status);
+  const auto reply_topic = dds::make_topic(participant.get(), dds::Topic::command_reply);
+  const dds::Entity status_writer(dds_create_writer(participant.get(), status_topic.get(), dds::status_qos().get(), nullptr),
+                                  "Status writer");
+  // The client waits for the daemon's reply writer to match before it trusts the Status.
+  const dds::Entity reply_writer(dds_create_writer(participant.get(), reply_topic.get(), dds::reply_qos().get(), nullptr),
+                                 "CommandReply writer");
+  pvcgel_v1_Status st{};
+  dds::copy_bounded(st.rig_id, "alien");
+  st.state = 200;
+  st.fault = 77;
+  st.period_s = 1e-3;
+  ASSERT_EQ(dds_write(status_writer.get(), &st), DDS_RETCODE_OK);
+  const auto r = client({"status"}, kDomain, "alien");
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.err.find("Status.state = 200 is not a value this program knows (0 DISABLED, 1 ARMED, 2 RUNNING"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(r.out.find("rig alien:"), std::string::npos) << "nothing printed from a Status it cannot read: " << r.out;
 }
 
 // A client publishing far faster than allowed for 10 s is throttled with

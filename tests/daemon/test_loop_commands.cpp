@@ -62,7 +62,7 @@ struct Rig {
       run(1);
     }
     ADD_FAILURE() << "no outcome for ticket " << t;
-    return RejectReason::count_;
+    return RejectReason::malformed;  // the test has failed already; a value no command here expects
   }
 };
 
@@ -275,4 +275,16 @@ TEST(LoopCommands, ModeSwitchByCommandIsBumpless) {
   EXPECT_EQ(r.outcome(t), RejectReason::accepted);
   EXPECT_EQ(r.last.mode, control::ControllerMode::pid);
   EXPECT_LE(std::abs(r.last.u_V - u_prev), 2.0 * noise_du) << "noise alone moves u by up to " << noise_du << " V";
+}
+
+// The bridge refuses unknown arguments already; the loop itself never casts one into an enum either.
+TEST(LoopCommands, AnUnknownModeOrTargetArgumentIsRefusedNotCast) {
+  Rig r;
+  r.run(2);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::set_mode, 7)), RejectReason::bad_argument);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::set_target, 2)), RejectReason::bad_argument);
+  EXPECT_EQ(r.loop->target(), LoopTarget::displacement);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::set_mode, 0)), RejectReason::accepted);
+  EXPECT_EQ(r.outcome(r.command(CommandKind::set_target, 1)), RejectReason::accepted);
+  EXPECT_EQ(r.loop->target(), LoopTarget::voltage);
 }

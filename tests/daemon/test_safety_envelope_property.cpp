@@ -136,7 +136,7 @@ void run_property(std::uint64_t seed, int clients, double simulated_s, Tally& ta
   for (long k = 1; k < cycles; ++k) {
     // Inputs, about every 20 ms of simulated time.
     if (h.chance(0.05)) {
-      const auto state = static_cast<LoopState>(h.io->snapshot.read().state);
+      const auto state = h.io->snapshot.read().state;
       const double p = h.uniform(0.0, 1.0);
       if (p < 0.55) tally.accepted_chunks += h.trajectory(cs[static_cast<size_t>(h.uniform(0, clients))]);
       else if (p < 0.65) h.command(state == LoopState::disabled ? CommandKind::arm : CommandKind::start);

@@ -103,9 +103,9 @@ TEST(RegisterMap, EncodeRejectsOutOfRangeAndLeavesRegistersAlone) {
 }
 
 TEST(RegisterMap, WordOrderNames) {
-  EXPECT_EQ(parse_word_order("high_first"), WordOrder::high_first);
-  EXPECT_EQ(parse_word_order("low_first"), WordOrder::low_first);
-  EXPECT_FALSE(parse_word_order("big").has_value());
+  EXPECT_EQ(pvcgel::parse_enum<WordOrder>("high_first"), WordOrder::high_first);
+  EXPECT_EQ(pvcgel::parse_enum<WordOrder>("low_first"), WordOrder::low_first);
+  EXPECT_FALSE(pvcgel::parse_enum<WordOrder>("big").has_value());
 }
 
 TEST(RegisterMap, SensorChannelDecodesMicrometresFromABlock) {

@@ -125,25 +125,18 @@ std::uint32_t get_u32(std::string_view s, std::size_t at) {
 
 }  // namespace
 
-std::string state_name(std::uint8_t v) {
-  if (v > static_cast<std::uint8_t>(daemon::LoopState::fault)) return unknown(v);
-  return std::string(daemon::to_string(static_cast<daemon::LoopState>(v)));
+// The live view shows what arrived, even from a daemon of another version: an unknown value is named
+// "unknown(N)" on the page (never cast or used as an index), rather than ending the stream.
+template <typename E>
+std::string name_or_unknown(std::uint8_t v) {
+  const auto e = from_wire<E>(v);
+  return e ? std::string(to_string(*e)) : unknown(v);
 }
 
-std::string fault_name(std::uint8_t v) {
-  if (v >= static_cast<std::uint8_t>(daemon::FaultReason::count_)) return unknown(v);
-  return std::string(daemon::to_string(static_cast<daemon::FaultReason>(v)));
-}
-
-std::string mode_name(std::uint8_t v) {
-  if (v >= control::kAllModes.size()) return unknown(v);
-  return std::string(control::to_string(static_cast<control::ControllerMode>(v)));
-}
-
-std::string reason_name(std::uint8_t v) {
-  if (v >= static_cast<std::uint8_t>(daemon::RejectReason::count_)) return unknown(v);
-  return std::string(daemon::to_string(static_cast<daemon::RejectReason>(v)));
-}
+std::string state_name(std::uint8_t v) { return name_or_unknown<daemon::LoopState>(v); }
+std::string fault_name(std::uint8_t v) { return name_or_unknown<daemon::FaultReason>(v); }
+std::string mode_name(std::uint8_t v) { return name_or_unknown<control::ControllerMode>(v); }
+std::string reason_name(std::uint8_t v) { return name_or_unknown<daemon::RejectReason>(v); }
 
 json to_json(const pvcgel_v1_Telemetry& t) {
   return json{{"rig_id", t.rig_id},         {"seq", t.seq},

@@ -47,8 +47,8 @@ TEST(LiveMessages, UnknownWireValuesAreNamedNotIndexed) {
   EXPECT_EQ(fault_name(255), "unknown(255)");
   // Every reason the daemon has is named (the bound follows the enum, not a value written here).
   EXPECT_EQ(fault_name(static_cast<std::uint8_t>(pvcgel::daemon::FaultReason::hv_disable_failed)), "hv_disable_failed");
-  EXPECT_EQ(fault_name(static_cast<std::uint8_t>(pvcgel::daemon::FaultReason::count_)),
-            "unknown(" + std::to_string(static_cast<int>(pvcgel::daemon::FaultReason::count_)) + ")");
+  const auto past_last = static_cast<std::uint8_t>(pvcgel::daemon::kFaultReasonNames.size());
+  EXPECT_EQ(fault_name(past_last), "unknown(" + std::to_string(past_last) + ")");
   EXPECT_EQ(mode_name(4), "unknown(4)");
   EXPECT_EQ(reason_name(250), "unknown(250)");
   EXPECT_EQ(mode_name(3), "inverse_pid_dob_ff");
