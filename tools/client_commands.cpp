@@ -285,9 +285,8 @@ void watch(DdsClient& c, double duration_s) {
               static_cast<unsigned long long>(first_seq), static_cast<unsigned long long>(last_seq));
 }
 
-}  // namespace
-
-void add_client_commands(CLI::App& app) {
+/// arm, start, stop, reset, clear: one command each, then the state it led to.
+void add_state_commands(CLI::App& app) {
   const auto simple = [&app](const char* name, const char* help, CommandKind kind) {
     auto opt = std::make_shared<ClientOptions>();
     auto* cmd = app.add_subcommand(name, help);
@@ -318,7 +317,10 @@ void add_client_commands(CLI::App& app) {
   simple("stop", "Ramp the output to 0 V and disable high voltage (the daemon keeps running)", CommandKind::stop);
   simple("reset", "Clear a fault (FAULT -> DISABLED)", CommandKind::reset);
   simple("clear", "Drop every queued setpoint segment (the current setpoint is held)", CommandKind::clear);
+}
 
+/// status and watch: read-only.
+void add_view_commands(CLI::App& app) {
   {
     auto opt = std::make_shared<ClientOptions>();
     auto* cmd = app.add_subcommand("status", "Print the rig's state, loop statistics and input counters");
@@ -343,6 +345,10 @@ void add_client_commands(CLI::App& app) {
       });
     });
   }
+}
+
+/// mode and target: a command with an argument from the enum's names.
+void add_argument_commands(CLI::App& app) {
   {
     auto opt = std::make_shared<ClientOptions>();
     auto name = std::make_shared<std::string>();
@@ -377,42 +383,52 @@ void add_client_commands(CLI::App& app) {
       });
     });
   }
-  {
-    auto opt = std::make_shared<ClientOptions>();
-    auto args = std::make_shared<SendArgs>();
-    auto* cmd = app.add_subcommand("send", "Send setpoints: hold LEVEL | ramp FROM TO | sine OFFSET AMP FREQ [PHASE] | "
-                                           "multiharmonic OFFSET A1 F1 [A2 F2 ...] | paper 0.1Hz|0.5Hz|1Hz|multi | csv FILE");
-    add_client_options(*cmd, *opt);
-    cmd->add_option("KIND", args->kind, "hold | ramp | sine | multiharmonic | paper | csv")
-        ->required()
-        ->check(CLI::IsMember({"hold", "ramp", "sine", "multiharmonic", "paper", "csv"}));
-    auto words = std::make_shared<std::vector<std::string>>();
-    cmd->add_option("VALUES", *words, "numbers (um, or V with --voltage), the paper reference name, or the CSV file");
-    cmd->add_option("--blend", args->blend_s, "raised-cosine blend from the setpoint in force (s)")->capture_default_str();
-    cmd->add_option("--duration", args->duration_s, "segment length (s); 0: until replaced (ramp: ramp time)");
-    cmd->add_option("--at", args->at_s, "loop time (s, as Telemetry t_s) to start at; default: now");
-    cmd->add_flag("--append", args->append, "start where the queued setpoints end instead of replacing them");
-    cmd->add_flag("--voltage", args->voltage, "voltage setpoints (open-loop target; see `pvcgel target`)");
-    cmd->add_flag("--start", args->start, "arm and start the rig first if it is not running");
-    cmd->callback([opt, args, words] {
-      SendArgs a = *args;
-      if (a.kind == "csv" || a.kind == "paper") {
-        if (words->size() != 1) throw CLI::ValidationError("VALUES", "send " + a.kind + " takes exactly one argument");
-        a.csv = (*words)[0];
-      } else {
-        for (const auto& w : *words) {
-          char* end = nullptr;
-          const double x = std::strtod(w.c_str(), &end);
-          if (end == w.c_str() || *end != '\0') throw CLI::ValidationError("VALUES", "'" + w + "' is not a number");
-          a.values.push_back(x);
-        }
+}
+
+void add_send_command(CLI::App& app) {
+  auto opt = std::make_shared<ClientOptions>();
+  auto args = std::make_shared<SendArgs>();
+  auto* cmd = app.add_subcommand("send", "Send setpoints: hold LEVEL | ramp FROM TO | sine OFFSET AMP FREQ [PHASE] | "
+                                         "multiharmonic OFFSET A1 F1 [A2 F2 ...] | paper 0.1Hz|0.5Hz|1Hz|multi | csv FILE");
+  add_client_options(*cmd, *opt);
+  cmd->add_option("KIND", args->kind, "hold | ramp | sine | multiharmonic | paper | csv")
+      ->required()
+      ->check(CLI::IsMember({"hold", "ramp", "sine", "multiharmonic", "paper", "csv"}));
+  auto words = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("VALUES", *words, "numbers (um, or V with --voltage), the paper reference name, or the CSV file");
+  cmd->add_option("--blend", args->blend_s, "raised-cosine blend from the setpoint in force (s)")->capture_default_str();
+  cmd->add_option("--duration", args->duration_s, "segment length (s); 0: until replaced (ramp: ramp time)");
+  cmd->add_option("--at", args->at_s, "loop time (s, as Telemetry t_s) to start at; default: now");
+  cmd->add_flag("--append", args->append, "start where the queued setpoints end instead of replacing them");
+  cmd->add_flag("--voltage", args->voltage, "voltage setpoints (open-loop target; see `pvcgel target`)");
+  cmd->add_flag("--start", args->start, "arm and start the rig first if it is not running");
+  cmd->callback([opt, args, words] {
+    SendArgs a = *args;
+    if (a.kind == "csv" || a.kind == "paper") {
+      if (words->size() != 1) throw CLI::ValidationError("VALUES", "send " + a.kind + " takes exactly one argument");
+      a.csv = (*words)[0];
+    } else {
+      for (const auto& w : *words) {
+        char* end = nullptr;
+        const double x = std::strtod(w.c_str(), &end);
+        if (end == w.c_str() || *end != '\0') throw CLI::ValidationError("VALUES", "'" + w + "' is not a number");
+        a.values.push_back(x);
       }
-      run_client([&] {
-        DdsClient c(*opt);
-        send(c, a);
-      });
+    }
+    run_client([&] {
+      DdsClient c(*opt);
+      send(c, a);
     });
-  }
+  });
+}
+
+}  // namespace
+
+void add_client_commands(CLI::App& app) {
+  add_state_commands(app);
+  add_view_commands(app);
+  add_argument_commands(app);
+  add_send_command(app);
 }
 
 }  // namespace pvcgel::tools

@@ -134,3 +134,27 @@ TEST(InputValidation, CommandsAndRateLimiter) {
   EXPECT_EQ(allowed, 5);
   EXPECT_TRUE(r.allow(100.2));
 }
+
+// A huge time is named in a few characters (%.10g), not as 300 digits cut off by the message buffer.
+TEST(InputValidation, AHugeStartTimeIsNamedShortly) {
+  Fixture f;
+  auto m = f.msg(1, {50.0});
+  m.start_time_s = 1e300;
+  const Verdict v = f.check(m);
+  EXPECT_EQ(v.reason, RejectReason::too_far_ahead);
+  EXPECT_EQ(v.detail, "start_time_s 1e+300 is more than 10 s after the loop time 10");
+}
+
+TEST(InputValidation, UnknownTargetKindAndTimingCodesAreMalformedNotCast) {
+  Fixture f;
+  auto m = f.msg(5, {50.0});
+  EXPECT_EQ(f.check(m).detail, "kind 5 is not 0..4 (samples, hold, ramp, sine, multisine)");
+  m = f.msg(1, {50.0});
+  m.target = 2;
+  EXPECT_EQ(f.check(m).reason, RejectReason::malformed);
+  m.target = 0;
+  m.timing = 9;
+  EXPECT_EQ(f.check(m).reason, RejectReason::malformed);
+  m.timing = 0;
+  EXPECT_TRUE(f.check(m).ok());
+}
