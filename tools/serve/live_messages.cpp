@@ -343,6 +343,24 @@ std::optional<ServiceCall> parse_service_call(std::string_view frame, std::strin
   return c;
 }
 
+std::optional<ClientMessage> parse_client_message(std::string_view frame, std::string& error) {
+  if (frame.size() < 5 || frame[0] != 0x01) {
+    error = "client message shorter than its 5-byte header (" + std::to_string(frame.size()) + " bytes)";
+    return std::nullopt;
+  }
+  return ClientMessage{get_u32(frame, 1), std::string(frame.substr(5))};
+}
+
+std::optional<ClientTopic> parse_client_topic(const std::string& topic, std::string& error) {
+  const auto slash = topic.find('/', 1);
+  if (topic.size() > 1 && topic[0] == '/' && slash != std::string::npos && slash > 1) {
+    const std::string kind = topic.substr(slash + 1);
+    if (kind == "command" || kind == "reference") return ClientTopic{topic.substr(1, slash - 1), kind};
+  }
+  error = "cannot publish on '" + topic.substr(0, 80) + "': clients publish only on /RIG/command and /RIG/reference";
+  return std::nullopt;
+}
+
 void ClientQueue::push_data(Frame f) {
   if (data_.size() >= max_data_) {
     data_.pop_front();

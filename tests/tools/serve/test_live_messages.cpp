@@ -81,6 +81,31 @@ TEST(LiveMessages, ServiceCallRoundTripAndTruncatedFramesAreRefused) {
   EXPECT_NE(error.find("exceeds"), std::string::npos);
 }
 
+TEST(LiveMessages, ParsesClientPublishedMessagesAndTheirTopics) {
+  std::string error;
+  std::string frame{'\x01', '\x07', '\x00', '\x00', '\x01'};  // channel 0x01000007, little-endian
+  frame += "{\"command\":\"arm\"}";
+  const auto m = parse_client_message(frame, error);
+  ASSERT_TRUE(m) << error;
+  EXPECT_EQ(m->channel_id, 0x01000007u);
+  EXPECT_EQ(m->payload, "{\"command\":\"arm\"}");
+  EXPECT_FALSE(parse_client_message(frame.substr(0, 4), error));
+  EXPECT_NE(error.find("5-byte header"), std::string::npos);
+
+  const auto command = parse_client_topic("/rig1/command", error);
+  ASSERT_TRUE(command) << error;
+  EXPECT_EQ(command->rig, "rig1");
+  EXPECT_EQ(command->kind, "command");
+  const auto reference = parse_client_topic("/lab-a/reference", error);
+  ASSERT_TRUE(reference) << error;
+  EXPECT_EQ(reference->rig, "lab-a");
+  EXPECT_EQ(reference->kind, "reference");
+  for (const char* bad : {"/rig1/telemetry", "rig1/command", "//command", "/rig1/command/x", "/command", ""}) {
+    EXPECT_FALSE(parse_client_topic(bad, error)) << bad;
+    EXPECT_NE(error.find("only on /RIG/command and /RIG/reference"), std::string::npos) << bad;
+  }
+}
+
 TEST(LiveMessages, BatchPlotsEveryNthSampleButCountsAllAndTheirGaps) {
   TelemetryBatcher b(10);
   for (std::uint64_t s = 1; s <= 100; ++s)
