@@ -79,7 +79,7 @@ class LiveServer final : public RigSink {
     std::string id;
     std::uint32_t index = 0;
     TelemetryBatcher batcher;
-    Clock::time_point last_batch = Clock::now();
+    Clock::time_point next_batch = Clock::now();
     std::uint64_t decimation_count = 0;
   };
 
@@ -291,8 +291,11 @@ void LiveServer::on_tick() {
   std::lock_guard lock(mutex_);
   const auto now = Clock::now();
   for (auto& [id, rig] : rigs_) {
-    if (rig->batcher.empty() || now - rig->last_batch < std::chrono::duration<double>(opt_.page_batch_period_s)) continue;
-    rig->last_batch = now;
+    if (rig->batcher.empty() || now < rig->next_batch) continue;
+    // On a fixed grid, so the page gets exactly 1 / period batches (= frames) a
+    // second whatever the DDS thread's wake-up granularity; no burst after a stall.
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(opt_.page_batch_period_s));
+    rig->next_batch = std::max(rig->next_batch + period, now - period);
     std::uint64_t log_time_ns = 0;
     json batch = rig->batcher.take(log_time_ns);
     batch["rig_id"] = rig->id;
