@@ -3,10 +3,12 @@
 #include <cmath>
 #include <cstring>
 #include <span>
+#include <vector>
 
 #include "control/controller.hpp"
 #include "daemon/control_loop.hpp"
 #include "daemon/input_validation.hpp"
+#include "pvcgel_v1_json_fields.hpp"
 
 namespace pvcgel::tools::serve {
 
@@ -14,84 +16,34 @@ namespace {
 
 using nlohmann::json;
 
-/// One IDL field in a JSON schema. The tables below follow daemon/dds/pvcgel_v1.idl
-/// field by field (names, order, units in the names, the IDL's comments).
-struct Field {
-  const char* name;
-  const char* type;  // JSON schema type; "number|null" for values that may be NaN
-  const char* description;
-};
+/// One field in a JSON schema. The IDL's fields come from tables generated at
+/// build time from daemon/dds/pvcgel_v1.idl (tools/serve/idl_json_schema.py);
+/// the fields below are the names `pvcgel serve` adds.
+using Field = idl::Field;
 
-constexpr Field kTelemetryFields[] = {
-    {"rig_id", "string", "rig id (the DDS key)"},
-    {"seq", "integer", "cycle number since the daemon started; gaps = lost samples"},
-    {"t_s", "number", "loop time of the cycle (s)"},
-    {"r_um", "number|null", "reference (um; in open-loop voltage mode the voltage setpoint, V)"},
-    {"y_um", "number|null", "measured displacement (null when the sensor is faulted)"},
-    {"u_V", "number|null", "amplifier command applied this cycle (V)"},
-    {"e_um", "number|null", "tracking error r - y (um)"},
-    {"d_hat", "number|null", "disturbance estimate (linear-block input units)"},
-    {"latency_us", "number", "wake-up latency of this cycle (us)"},
-    {"mode", "integer", "0 pid, 1 inverse_pid, 2 inverse_pid_dob, 3 inverse_pid_dob_ff"},
-    {"state", "integer", "0 DISABLED, 1 ARMED, 2 RUNNING, 3 RAMP_DOWN, 4 FAULT"},
-    {"fault", "integer", "FaultReason (0 none)"},
-    {"high_voltage", "boolean", "high voltage enabled"},
-    {"target", "integer", "0 displacement (closed loop), 1 voltage (open loop)"},
-    {"chunk_seq", "integer", "Trajectory chunk that set r (0: none / local)"},
-    {"stamp_ns", "integer", "CLOCK_REALTIME at the cycle's wake-up (ns)"},
+constexpr Field kTelemetryNames[] = {
     {"mode_name", "string", "mode by name"},
     {"state_name", "string", "state by name"},
     {"fault_name", "string", "fault reason by name"},
 };
 
-constexpr Field kStatusFields[] = {
-    {"rig_id", "string", "rig id"},
-    {"t_s", "number", "loop time of this status (s)"},
-    {"state", "integer", "as Telemetry.state"},
-    {"fault", "integer", "as Telemetry.fault"},
-    {"mode", "integer", "as Telemetry.mode"},
-    {"target", "integer", "as Telemetry.target"},
-    {"high_voltage", "boolean", "high voltage enabled"},
-    {"period_s", "number", "loop period (s)"},
-    {"queued_until_s", "number", "loop time up to which setpoints are queued (< t_s: none)"},
-    {"cycles", "integer", "cycles run"},
-    {"overruns", "integer", "missed deadlines"},
-    {"records_dropped", "integer", "loop records the daemon could not hand on"},
-    {"latency_p50_us", "number", "wake-up latency p50 (us)"},
-    {"latency_p99_us", "number", "wake-up latency p99 (us)"},
-    {"latency_p999_us", "number", "wake-up latency p99.9 (us)"},
-    {"latency_max_us", "number", "wake-up latency max (us)"},
-    {"compute_p99_us", "number", "compute time p99 (us)"},
-    {"chunks_accepted", "integer", "trajectory chunks accepted"},
-    {"commands_accepted", "integer", "commands accepted"},
-    {"rejects_total", "integer", "inputs refused"},
-    {"rejects_by_reason", "array", "refusals per RejectReason (index = reason)"},
-    {"last_reject_reason", "integer", "RejectReason of the last refusal"},
-    {"last_reject_detail", "string", "the last refusal's sentence"},
-    {"config_hash", "string", "hash of the daemon's configuration"},
-    {"version", "string", "pvcgeld version"},
-    {"hal_backend", "string", "HAL backend"},
+constexpr Field kStatusNames[] = {
     {"state_name", "string", "state by name"},
     {"mode_name", "string", "mode by name"},
     {"fault_name", "string", "fault reason by name"},
     {"last_reject_reason_name", "string", "last refusal's reason by name"},
 };
 
-constexpr Field kReplyFields[] = {
-    {"rig_id", "string", "rig id"},
-    {"client_id", "string", "the client that sent the command or chunk"},
-    {"seq", "integer", "command_seq or chunk_seq answered"},
-    {"is_trajectory", "boolean", "answers a Trajectory (else a Command)"},
-    {"accepted", "boolean", "accepted"},
-    {"reason", "integer", "RejectReason (0 accepted)"},
-    {"detail", "string", "reason with the offending value"},
+constexpr Field kReplyNames[] = {
     {"reason_name", "string", "reason by name"},
 };
 
-std::string schema(const char* title, std::span<const Field> fields) {
+std::string schema(const char* title, std::span<const Field> fields, std::span<const Field> added = {}) {
   json props = json::object();
   json required = json::array();
-  for (const auto& f : fields) {
+  std::vector<Field> all(fields.begin(), fields.end());
+  all.insert(all.end(), added.begin(), added.end());
+  for (const auto& f : all) {
     json p{{"description", f.description}};
     if (std::strcmp(f.type, "number|null") == 0) p["type"] = json::array({"number", "null"});
     else p["type"] = f.type;
@@ -192,9 +144,9 @@ json to_json(const pvcgel_v1_CommandReply& r) {
               {"detail", r.detail},       {"reason_name", reason_name(r.reason)}};
 }
 
-std::string telemetry_schema() { return schema("pvcgel.v1.Telemetry", kTelemetryFields); }
-std::string status_schema() { return schema("pvcgel.v1.Status", kStatusFields); }
-std::string reply_schema() { return schema("pvcgel.v1.CommandReply", kReplyFields); }
+std::string telemetry_schema() { return schema("pvcgel.v1.Telemetry", idl::kTelemetry, kTelemetryNames); }
+std::string status_schema() { return schema("pvcgel.v1.Status", idl::kStatus, kStatusNames); }
+std::string reply_schema() { return schema("pvcgel.v1.CommandReply", idl::kCommandReply, kReplyNames); }
 
 std::string batch_schema() {
   static constexpr Field kFields[] = {
@@ -334,6 +286,24 @@ std::optional<ServiceCall> parse_service_call(std::string_view frame, std::strin
   c.encoding = std::string(frame.substr(13, encoding_length));
   c.payload = std::string(frame.substr(13 + encoding_length));
   return c;
+}
+
+std::optional<ClientMessage> parse_client_message(std::string_view frame, std::string& error) {
+  if (frame.size() < 5 || frame[0] != 0x01) {
+    error = "client message shorter than its 5-byte header (" + std::to_string(frame.size()) + " bytes)";
+    return std::nullopt;
+  }
+  return ClientMessage{get_u32(frame, 1), std::string(frame.substr(5))};
+}
+
+std::optional<ClientTopic> parse_client_topic(const std::string& topic, std::string& error) {
+  const auto slash = topic.find('/', 1);
+  if (topic.size() > 1 && topic[0] == '/' && slash != std::string::npos && slash > 1) {
+    const std::string kind = topic.substr(slash + 1);
+    if (kind == "command" || kind == "reference") return ClientTopic{topic.substr(1, slash - 1), kind};
+  }
+  error = "cannot publish on '" + topic.substr(0, 80) + "': clients publish only on /RIG/command and /RIG/reference";
+  return std::nullopt;
 }
 
 void ClientQueue::push_data(Frame f) {

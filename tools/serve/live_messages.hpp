@@ -80,6 +80,24 @@ struct ServiceCall {
 /// Parses opcode 2; nullopt and `error` set for a short or inconsistent frame.
 std::optional<ServiceCall> parse_service_call(std::string_view frame, std::string& error);
 
+/// A client's published message (opcode 1, capability clientPublish).
+struct ClientMessage {
+  std::uint32_t channel_id = 0;
+  std::string payload;
+};
+/// Parses opcode 1; nullopt and `error` set for a frame shorter than its 5-byte header.
+std::optional<ClientMessage> parse_client_message(std::string_view frame, std::string& error);
+
+/// What a client may publish on: `/RIG/command` and `/RIG/reference` (the
+/// requests of the services of the same names), JSON only.
+struct ClientTopic {
+  std::string rig;
+  std::string kind;  ///< "command" or "reference"
+};
+/// The rig and kind of a client channel's topic; nullopt and `error` (naming
+/// the topic) for any other topic.
+std::optional<ClientTopic> parse_client_topic(const std::string& topic, std::string& error);
+
 /// One outgoing frame; payloads shared between clients are not copied per client.
 struct Frame {
   std::shared_ptr<const std::string> data;

@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <thread>
 
@@ -23,6 +24,12 @@ constexpr std::size_t kMaxClientMessage = 64 * 1024;
 constexpr std::size_t kMaxBuffered = 2 * 1024 * 1024;
 /// Rigs served at most: anyone on the domain can publish rig ids, each costs channels and memory.
 constexpr std::size_t kMaxRigs = 64;
+/// Client-published channels one client may hold (two per rig make sense).
+constexpr std::size_t kMaxClientChannels = 16;
+/// The refusal of every control request (service call or client publish) without --allow-control.
+constexpr const char* kControlDisabled =
+    "control is disabled: this pvcgel serve only watches (start it with --allow-control to arm, start, stop, reset, "
+    "change mode or send references)";
 
 /// Channel offsets within a rig's block of ids (rig k: 1 + 8 k + offset).
 enum Topic : std::uint32_t { telemetry, telemetry_decimated, telemetry_batch, status, command_reply, kTopics };
@@ -52,12 +59,19 @@ class LiveServer final : public RigSink {
   void on_tick() override;
 
  private:
+  /// A channel a client advertised to publish control requests on (clientPublish).
+  struct ClientChannel {
+    std::string topic;
+    std::string rig;
+    ControlWorker::Kind kind;
+  };
   struct Client {
     std::uint64_t id = 0;
     Conn conn = 0;
     std::string peer;
     ClientQueue queue;
     std::map<std::uint32_t, std::uint32_t> subscriptions;  // subscription id -> channel id
+    std::map<std::uint32_t, ClientChannel> published;      // client channel id -> what it publishes on
     bool drain_posted = false;
     std::uint64_t reported_drops = 0;
   };
@@ -65,7 +79,7 @@ class LiveServer final : public RigSink {
     std::string id;
     std::uint32_t index = 0;
     TelemetryBatcher batcher;
-    Clock::time_point last_batch = Clock::now();
+    Clock::time_point next_batch = Clock::now();
     std::uint64_t decimation_count = 0;
   };
 
@@ -86,7 +100,16 @@ class LiveServer final : public RigSink {
   void on_message(Conn h, const std::string& data, bool binary);
   void handle_text(Client& c, const std::string& text);
   void handle_service_call(Client& c, const std::string& frame);
+  void handle_client_advertise(Client& c, const json& m);
+  void handle_client_message(Client& c, const std::string& frame);
+  /// Runs `request` on the control worker; `answer` gets the client back (if still connected) with the result.
+  using Answer = std::function<void(Client& c, bool ok, const std::string& result)>;
+  bool submit_control_locked(const Client& c, const std::string& rig, ControlWorker::Kind kind, json request,
+                             Answer answer);
+  void status_locked(Client& c, int level, const std::string& message);
   void disconnect(Conn h, CloseCode code, const std::string& reason);
+  /// Disconnects from the network thread, after the lock (mutex_) is released.
+  void disconnect_later(const Client& c, CloseCode code, std::string reason);
   Client* client_locked(Conn h);
   WsTransport::Files load_page() const;
 
@@ -192,9 +215,7 @@ void LiveServer::schedule_drain_locked(Client& c) {
 
 void LiveServer::send_protocol_locked(Client& c, std::string data, bool binary) {
   if (!c.queue.push_protocol(Frame{shared(std::move(data)), binary})) {
-    ws_->post([this, conn = c.conn] {
-      disconnect(conn, kTryAgainLater, "client too slow: protocol backlog over 1024 messages");
-    });
+    disconnect_later(c, kTryAgainLater, "client too slow: protocol backlog over 1024 messages");
   }
   schedule_drain_locked(c);
 }
@@ -270,8 +291,11 @@ void LiveServer::on_tick() {
   std::lock_guard lock(mutex_);
   const auto now = Clock::now();
   for (auto& [id, rig] : rigs_) {
-    if (rig->batcher.empty() || now - rig->last_batch < std::chrono::duration<double>(opt_.page_batch_period_s)) continue;
-    rig->last_batch = now;
+    if (rig->batcher.empty() || now < rig->next_batch) continue;
+    // On a fixed grid, so the page gets exactly 1 / period batches (= frames) a
+    // second whatever the DDS thread's wake-up granularity; no burst after a stall.
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(opt_.page_batch_period_s));
+    rig->next_batch = std::max(rig->next_batch + period, now - period);
     std::uint64_t log_time_ns = 0;
     json batch = rig->batcher.take(log_time_ns);
     batch["rig_id"] = rig->id;
@@ -293,7 +317,7 @@ void LiveServer::on_open(Conn h) {
   std::fprintf(stderr, "pvcgel serve: client %llu (%s) connected\n", static_cast<unsigned long long>(c->id), c->peer.c_str());
   const json info{{"op", "serverInfo"},
                   {"name", "pvcgel serve (DDS domain " + std::to_string(opt_.dds.domain) + ")"},
-                  {"capabilities", json::array({"services"})},
+                  {"capabilities", json::array({"services", "clientPublish"})},
                   {"supportedEncodings", json::array({"json"})},
                   {"metadata",
                    {{"domain", std::to_string(opt_.dds.domain)},
@@ -370,6 +394,10 @@ void LiveServer::disconnect(Conn h, CloseCode code, const std::string& reason) {
   ws_->close(h, code, reason);
 }
 
+void LiveServer::disconnect_later(const Client& c, CloseCode code, std::string reason) {
+  ws_->post([this, conn = c.conn, code, reason = std::move(reason)] { disconnect(conn, code, reason); });
+}
+
 void LiveServer::on_message(Conn h, const std::string& data, bool binary) {
   std::unique_lock lock(mutex_);
   Client* c = client_locked(h);
@@ -383,12 +411,15 @@ void LiveServer::on_message(Conn h, const std::string& data, bool binary) {
     }
     return;
   }
+  if (!data.empty() && data[0] == 0x01) return handle_client_message(*c, data);
   if (!data.empty() && data[0] == 0x02) return handle_service_call(*c, data);
   const int op = data.empty() ? -1 : static_cast<unsigned char>(data[0]);
   lock.unlock();
-  disconnect(h, kUnsupportedData,
-             op == 1 ? std::string("client publish is not supported by this server (no clientPublish capability)")
-                     : "unknown binary opcode " + std::to_string(op));
+  disconnect(h, kUnsupportedData, "unknown binary opcode " + std::to_string(op));
+}
+
+void LiveServer::status_locked(Client& c, int level, const std::string& message) {
+  send_protocol_locked(c, json{{"op", "status"}, {"level", level}, {"message", message}}.dump(), false);
 }
 
 void LiveServer::handle_text(Client& c, const std::string& text) {
@@ -396,9 +427,7 @@ void LiveServer::handle_text(Client& c, const std::string& text) {
   if (m.is_discarded()) throw std::runtime_error("invalid JSON message (" + std::to_string(text.size()) + " bytes)");
   if (!m.is_object() || !m.contains("op") || !m["op"].is_string()) throw std::runtime_error("message without a string \"op\"");
   const std::string op = m["op"];
-  const auto status = [&](int level, const std::string& message) {
-    send_protocol_locked(c, json{{"op", "status"}, {"level", level}, {"message", message}}.dump(), false);
-  };
+  const auto status = [&](int level, const std::string& message) { status_locked(c, level, message); };
   if (op == "subscribe") {
     if (!m.contains("subscriptions") || !m["subscriptions"].is_array()) throw std::runtime_error("subscribe without a \"subscriptions\" array");
     for (const auto& s : m["subscriptions"]) {
@@ -417,10 +446,16 @@ void LiveServer::handle_text(Client& c, const std::string& text) {
     if (!m.contains("subscriptionIds") || !m["subscriptionIds"].is_array()) throw std::runtime_error("unsubscribe without a \"subscriptionIds\" array");
     for (const auto& id : m["subscriptionIds"])
       if (id.is_number_unsigned()) c.subscriptions.erase(id.get<std::uint32_t>());
-  } else if (op == "advertise" || op == "unadvertise" || op == "getParameters" || op == "setParameters" ||
+  } else if (op == "advertise") {
+    handle_client_advertise(c, m);
+  } else if (op == "unadvertise") {
+    if (!m.contains("channelIds") || !m["channelIds"].is_array()) throw std::runtime_error("unadvertise without a \"channelIds\" array");
+    for (const auto& id : m["channelIds"])
+      if (id.is_number_unsigned()) c.published.erase(id.get<std::uint32_t>());
+  } else if (op == "getParameters" || op == "setParameters" ||
              op == "subscribeParameterUpdates" || op == "unsubscribeParameterUpdates" ||
              op == "subscribeConnectionGraph" || op == "unsubscribeConnectionGraph" || op == "fetchAsset") {
-    status(1, "'" + op + "' is not supported by this server (capabilities: services)");
+    status(1, "'" + op + "' is not supported by this server (capabilities: services, clientPublish)");
   } else {
     throw std::runtime_error("unknown op '" + op.substr(0, 40) + "'");
   }
@@ -429,10 +464,7 @@ void LiveServer::handle_text(Client& c, const std::string& text) {
 void LiveServer::handle_service_call(Client& c, const std::string& frame) {
   std::string error;
   const auto call = parse_service_call(frame, error);
-  if (!call) {
-    ws_->post([this, conn = c.conn, error] { disconnect(conn, kPolicyViolation, error); });
-    return;
-  }
+  if (!call) return disconnect_later(c, kPolicyViolation, error);
   const auto fail = [&](const std::string& message) {
     send_protocol_locked(c,
                          json{{"op", "serviceCallFailure"}, {"serviceId", call->service_id}, {"callId", call->call_id},
@@ -442,27 +474,78 @@ void LiveServer::handle_service_call(Client& c, const std::string& frame) {
   };
   const std::uint32_t rig_index = (call->service_id - 1) / 2;
   if (call->service_id == 0 || rig_index >= rig_by_index_.size()) return fail("unknown service " + std::to_string(call->service_id));
-  if (!opt_.allow_control)
-    return fail("control is disabled: this pvcgel serve only watches (start it with --allow-control to arm, start, "
-                "stop, reset, change mode or send references)");
+  if (!opt_.allow_control) return fail(kControlDisabled);
   if (call->encoding != "json") return fail("unsupported encoding '" + call->encoding + "' (json only)");
   json request = json::parse(call->payload, nullptr, false);
   if (request.is_discarded()) return fail("the request is not valid JSON");
   const auto kind = (call->service_id - 1) % 2 == 0 ? ControlWorker::Kind::command : ControlWorker::Kind::reference;
-  const std::uint64_t client_id = c.id;
   const auto sid = call->service_id, cid = call->call_id;
-  const bool queued = worker_->submit(rig_by_index_[rig_index]->id, kind, std::move(request),
-                                      [this, client_id, sid, cid](bool ok, const std::string& result) {
-    std::lock_guard lock(mutex_);
-    const auto it = clients_.find(client_id);
-    if (it == clients_.end()) return;
-    if (ok) send_protocol_locked(*it->second, service_response_frame(sid, cid, "json", result), true);
+  const bool queued = submit_control_locked(c, rig_by_index_[rig_index]->id, kind, std::move(request),
+                                            [this, sid, cid](Client& to, bool ok, const std::string& result) {
+    if (ok) send_protocol_locked(to, service_response_frame(sid, cid, "json", result), true);
     else
-      send_protocol_locked(*it->second,
-                           json{{"op", "serviceCallFailure"}, {"serviceId", sid}, {"callId", cid}, {"message", result}}.dump(),
+      send_protocol_locked(to, json{{"op", "serviceCallFailure"}, {"serviceId", sid}, {"callId", cid}, {"message", result}}.dump(),
                            false);
   });
   if (!queued) fail("busy: 8 control requests are already waiting for the daemon");
+}
+
+bool LiveServer::submit_control_locked(const Client& c, const std::string& rig, ControlWorker::Kind kind, json request,
+                                       Answer answer) {
+  return worker_->submit(rig, kind, std::move(request),
+                         [this, client_id = c.id, answer = std::move(answer)](bool ok, const std::string& result) {
+    std::lock_guard lock(mutex_);
+    const auto it = clients_.find(client_id);
+    if (it != clients_.end()) answer(*it->second, ok, result);
+  });
+}
+
+void LiveServer::handle_client_advertise(Client& c, const json& m) {
+  if (!m.contains("channels") || !m["channels"].is_array()) throw std::runtime_error("advertise without a \"channels\" array");
+  for (const auto& ch : m["channels"]) {
+    if (!ch.is_object() || !ch.contains("id") || !ch["id"].is_number_unsigned() || !ch.contains("topic") ||
+        !ch["topic"].is_string() || !ch.contains("encoding") || !ch["encoding"].is_string())
+      throw std::runtime_error("advertise: each channel needs unsigned \"id\", string \"topic\" and \"encoding\"");
+    const std::string topic = ch["topic"], encoding = ch["encoding"];
+    const auto refuse = [&](const std::string& why) { status_locked(c, 2, "client channel '" + topic.substr(0, 80) + "' refused: " + why); };
+    std::string error;
+    const auto parsed = parse_client_topic(topic, error);
+    if (!opt_.allow_control) refuse(kControlDisabled);
+    else if (!parsed) refuse(error);
+    else if (!rigs_.contains(parsed->rig)) refuse("no rig '" + parsed->rig + "' on DDS domain " + std::to_string(opt_.dds.domain));
+    else if (encoding != "json") refuse("encoding '" + encoding.substr(0, 40) + "' (json only)");
+    else if (c.published.size() >= kMaxClientChannels) refuse("at most " + std::to_string(kMaxClientChannels) + " client channels");
+    else {
+      const auto kind = parsed->kind == "command" ? ControlWorker::Kind::command : ControlWorker::Kind::reference;
+      c.published[ch["id"].get<std::uint32_t>()] = ClientChannel{topic, parsed->rig, kind};
+      status_locked(c, 0, "client channel '" + topic + "' accepted: each message goes to the daemon; its reply comes back "
+                          "as a status message and on /" + parsed->rig + "/command_reply");
+    }
+  }
+}
+
+void LiveServer::handle_client_message(Client& c, const std::string& frame) {
+  std::string error;
+  const auto msg = parse_client_message(frame, error);
+  if (!msg) return disconnect_later(c, kPolicyViolation, error);
+  const std::string not_sent = "message on client channel " + std::to_string(msg->channel_id) + " not sent: ";
+  if (!opt_.allow_control) return status_locked(c, 2, not_sent + kControlDisabled);
+  const auto ch = c.published.find(msg->channel_id);
+  if (ch == c.published.end()) return status_locked(c, 2, not_sent + "the channel was not advertised (or was refused)");
+  json request = json::parse(msg->payload, nullptr, false);
+  if (request.is_discarded()) return status_locked(c, 2, not_sent + "not valid JSON");
+  const std::string what = ch->second.topic + " " + request.dump().substr(0, 200);
+  const bool queued = submit_control_locked(c, ch->second.rig, ch->second.kind, std::move(request),
+                                            [this, what](Client& to, bool ok, const std::string& result) {
+    if (!ok) return status_locked(to, 2, what + ": failed: " + result);
+    const json r = json::parse(result);
+    const bool accepted = r["accepted"].get<bool>();
+    status_locked(to, accepted ? 0 : 1,
+                  what + (accepted ? ": accepted by the daemon"
+                                   : ": refused by the daemon: " + r["reason"].get<std::string>() + ": " +
+                                         r["detail"].get<std::string>()));
+  });
+  if (!queued) status_locked(c, 2, not_sent + "busy: 8 control requests are already waiting for the daemon");
 }
 
 int LiveServer::run() {

@@ -15,12 +15,13 @@ const RIG = "live";
 function connect(port) {
   const ws = new WebSocket(`ws://127.0.0.1:${port}`, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
   const client = new FoxgloveClient({ ws });
-  const s = { client, ws, channels: new Map(), services: new Map(), info: null, responses: [], failures: [], messages: new Map(), closed: null };
+  const s = { client, ws, channels: new Map(), services: new Map(), info: null, responses: [], failures: [], statuses: [], messages: new Map(), closed: null };
   client.on("serverInfo", (m) => { s.info = m; });
   client.on("advertise", (chs) => { for (const c of chs) s.channels.set(c.topic, c); });
   client.on("advertiseServices", (svs) => { for (const v of svs) s.services.set(v.name, v); });
   client.on("serviceCallResponse", (r) => s.responses.push({ callId: r.callId, body: JSON.parse(new TextDecoder().decode(r.data)) }));
   client.on("serviceCallFailure", (f) => s.failures.push(f));
+  client.on("status", (m) => s.statuses.push(m));
   client.on("message", (m) => {
     const list = s.messages.get(m.subscriptionId) ?? [];
     list.push(JSON.parse(new TextDecoder().decode(m.data)));
@@ -45,6 +46,22 @@ async function call(s, name, request) {
   }, 15000, 20);
 }
 
+/** Publishes `request` as JSON on client channel `id`; resolves with the first status message naming `topic` after it. */
+async function publish(s, id, topic, request) {
+  const seen = s.statuses.length;
+  s.client.sendMessage(id, new TextEncoder().encode(JSON.stringify(request)));
+  return h.waitFor(`the status answering ${topic} ${JSON.stringify(request)}`,
+    () => s.statuses.slice(seen).find((m) => m.message.includes(topic) || m.message.includes("not sent")), 15000, 20);
+}
+
+/** Advertises a client channel; resolves with its id and the server's status answer. */
+async function advertise(s, topic) {
+  const seen = s.statuses.length;
+  const id = s.client.advertise({ topic, encoding: "json", schemaName: "pvcgel.serve.CommandRequest" });
+  const answer = await h.waitFor(`the answer to advertising ${topic}`, () => s.statuses.slice(seen).find((m) => m.message.includes(topic)), 5000, 20);
+  return { id, answer };
+}
+
 /** A raw WebSocket client that sends `data` and resolves with the close code and reason. */
 async function sendGarbage(port, data) {
   const ws = new WebSocket(`ws://127.0.0.1:${port}`, ["foxglove.websocket.v1"]);
@@ -60,7 +77,8 @@ const watchOnly = await h.startServe(a, []);
 try {
   const s = connect(control.port);
   await h.waitFor("the rig's channels", () => s.channels.has(`/${RIG}/telemetry`) && s.services.has(`/${RIG}/command`), 15000);
-  h.check(s.info.capabilities.includes("services") && s.info.metadata.allow_control === "true", "serverInfo: services, control allowed");
+  h.check(s.info.capabilities.includes("services") && s.info.capabilities.includes("clientPublish") && s.info.metadata.allow_control === "true",
+    "serverInfo: services and clientPublish, control allowed");
   for (const t of ["telemetry", "telemetry_decimated", "telemetry_batch", "status", "command_reply"]) {
     const c = s.channels.get(`/${RIG}/${t}`);
     h.check(c && c.encoding === "json" && c.schemaEncoding === "jsonschema" && JSON.parse(c.schema).type === "object", `channel /${RIG}/${t} (json, JSON schema)`);
@@ -102,6 +120,27 @@ try {
   const rs = got.map((m) => m.r_um);
   h.check(Math.max(...rs) - Math.min(...rs) > 5, `r follows the multi-harmonic reference (span ${(Math.max(...rs) - Math.min(...rs)).toFixed(1)} um)`);
 
+  // Client publish (Foxglove's Publish panel): a client-advertised /RIG/command channel.
+  // The command goes through the daemon's validation; its CommandReply comes back
+  // as a status message and on /RIG/command_reply.
+  const replies = s.client.subscribe(s.channels.get(`/${RIG}/command_reply`).id);
+  const cmd = await advertise(s, `/${RIG}/command`);
+  h.check(cmd.answer.level === 0 && /accepted/.test(cmd.answer.message), `client channel /${RIG}/command accepted (${cmd.answer.message})`);
+  const armed = await publish(s, cmd.id, `/${RIG}/command`, { command: "arm" });
+  h.check(armed.level === 1 && /refused by the daemon: illegal_in_state/.test(armed.message), `published arm while RUNNING: the daemon's refusal (${armed.message})`);
+  const reply = await h.waitFor("the CommandReply of the published arm", () => (s.messages.get(replies) ?? []).find((r) => r.reason_name === "illegal_in_state"), 5000, 20);
+  h.check(reply.accepted === false && reply.rig_id === RIG, `its CommandReply on /${RIG}/command_reply: ${reply.reason_name}: ${reply.detail}`);
+  const refCh = await advertise(s, `/${RIG}/reference`);
+  const published = await publish(s, refCh.id, `/${RIG}/reference`, { reference: "multi", blend_s: 1.0 });
+  h.check(published.level === 0 && /accepted by the daemon/.test(published.message), `published the paper's multi-harmonic reference: ${published.message}`);
+  const wrong = await advertise(s, `/${RIG}/telemetry`);
+  h.check(wrong.answer.level === 2 && /only on \/RIG\/command and \/RIG\/reference/.test(wrong.answer.message), `a client channel on another topic is refused (${wrong.answer.message})`);
+  const unsent = await publish(s, wrong.id, "not sent", { command: "stop" });
+  h.check(unsent.level === 2 && /not advertised/.test(unsent.message), `a message on the refused channel is not sent (${unsent.message})`);
+  s.client.unadvertise(cmd.id);
+  s.client.unadvertise(refCh.id);
+  s.client.unsubscribe(replies);
+
   // A stalled client (10 subscriptions to every sample, never reading) does not hold up the
   // others: its frames are dropped oldest-first and counted. (Building its 10 kHz of frames
   // costs the server some CPU, so the rate bound here is 900/s; no sample may be missing.)
@@ -135,7 +174,12 @@ try {
   h.check(!refused.ok && /--allow-control/.test(refused.message), `stop without --allow-control: refused (${refused.message})`);
   const after = s.messages.get(sub).at(-1);
   await h.sleep(300);
-  h.check(s.messages.get(sub).at(-1).state_name === "RUNNING" && after.state_name === "RUNNING", "the refused stop did not reach the daemon");
+  const denied = await advertise(w, `/${RIG}/command`);
+  h.check(denied.answer.level === 2 && /--allow-control/.test(denied.answer.message), `client publish without --allow-control: the channel is refused (${denied.answer.message})`);
+  const deniedMessage = await publish(w, denied.id, "not sent", { command: "stop" });
+  h.check(deniedMessage.level === 2 && /control is disabled/.test(deniedMessage.message), `and a message on it is refused (${deniedMessage.message})`);
+  await h.sleep(300);
+  h.check(s.messages.get(sub).at(-1).state_name === "RUNNING" && after.state_name === "RUNNING", "neither the refused stop nor the refused published stop reached the daemon");
 
   // Garbage: that client is disconnected with a reason; the Foxglove client keeps receiving.
   for (const [what, data, code, reason] of [
@@ -143,6 +187,7 @@ try {
     ["unknown op", JSON.stringify({ op: "selfDestruct" }), 1008, /unknown op 'selfDestruct'/],
     ["oversized", "x".repeat(200 * 1024), 1009, /.*/],
     ["unknown binary opcode", Buffer.from([0x7f, 1, 2, 3]), 1003, /unknown binary opcode 127/],
+    ["truncated client message", Buffer.from([0x01, 1, 2]), 1008, /5-byte header/],
   ]) {
     const before = s.messages.get(sub).length;
     const closed = await sendGarbage(control.port, data);

@@ -34,8 +34,10 @@ export function args() {
   return a;
 }
 
-/** Like tests/support/subprocess.hpp's unique_dds_domain: one domain per test process. */
-export const domain = 30 + ((process.pid * 7) % 190);
+/** Like tests/support/subprocess.hpp's unique_dds_domain: one domain per test process
+ *  (PVCGEL_TEST_DDS_DOMAIN chooses it, for a machine shared with other engineers' runs). */
+export const domain = process.env.PVCGEL_TEST_DDS_DOMAIN ? Number(process.env.PVCGEL_TEST_DDS_DOMAIN)
+  : 30 + ((process.pid * 7) % 190);
 
 export const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 

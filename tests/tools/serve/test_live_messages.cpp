@@ -81,6 +81,31 @@ TEST(LiveMessages, ServiceCallRoundTripAndTruncatedFramesAreRefused) {
   EXPECT_NE(error.find("exceeds"), std::string::npos);
 }
 
+TEST(LiveMessages, ParsesClientPublishedMessagesAndTheirTopics) {
+  std::string error;
+  std::string frame{'\x01', '\x07', '\x00', '\x00', '\x01'};  // channel 0x01000007, little-endian
+  frame += "{\"command\":\"arm\"}";
+  const auto m = parse_client_message(frame, error);
+  ASSERT_TRUE(m) << error;
+  EXPECT_EQ(m->channel_id, 0x01000007u);
+  EXPECT_EQ(m->payload, "{\"command\":\"arm\"}");
+  EXPECT_FALSE(parse_client_message(frame.substr(0, 4), error));
+  EXPECT_NE(error.find("5-byte header"), std::string::npos);
+
+  const auto command = parse_client_topic("/rig1/command", error);
+  ASSERT_TRUE(command) << error;
+  EXPECT_EQ(command->rig, "rig1");
+  EXPECT_EQ(command->kind, "command");
+  const auto reference = parse_client_topic("/lab-a/reference", error);
+  ASSERT_TRUE(reference) << error;
+  EXPECT_EQ(reference->rig, "lab-a");
+  EXPECT_EQ(reference->kind, "reference");
+  for (const char* bad : {"/rig1/telemetry", "rig1/command", "//command", "/rig1/command/x", "/command", ""}) {
+    EXPECT_FALSE(parse_client_topic(bad, error)) << bad;
+    EXPECT_NE(error.find("only on /RIG/command and /RIG/reference"), std::string::npos) << bad;
+  }
+}
+
 TEST(LiveMessages, BatchPlotsEveryNthSampleButCountsAllAndTheirGaps) {
   TelemetryBatcher b(10);
   for (std::uint64_t s = 1; s <= 100; ++s)
@@ -143,9 +168,31 @@ void expect_schema_matches_idl(const std::string& schema_text, const std::string
 }
 }  // namespace
 
-// The schemas are the IDL's fields (plus *_name strings): a field added to the IDL fails here until served.
+// The schemas' fields are generated at build time from the IDL (tools/serve/idl_json_schema.py);
+// this independent parse of the IDL checks the generator: every field, nothing else but the
+// *_name strings, JSON types from the IDL types. (A field added to the IDL but not encoded
+// by to_json fails TelemetryJsonCarriesEveryIdlFieldAndNamesAndNullForNaN and the like.)
 TEST(LiveMessages, SchemasListExactlyTheIdlFields) {
   expect_schema_matches_idl(telemetry_schema(), "Telemetry");
   expect_schema_matches_idl(status_schema(), "Status");
   expect_schema_matches_idl(reply_schema(), "CommandReply");
+  const auto telemetry = nlohmann::json::parse(telemetry_schema())["properties"];
+  EXPECT_EQ(telemetry["y_um"]["type"], nlohmann::json::array({"number", "null"}));  // double: NaN is null
+  EXPECT_EQ(telemetry["seq"]["type"], "integer");                                    // unsigned long long
+  EXPECT_EQ(telemetry["high_voltage"]["type"], "boolean");
+  EXPECT_EQ(telemetry["rig_id"]["type"], "string");                                  // @key string<32>
+  EXPECT_EQ(telemetry["e_um"]["description"], "r - y");                              // the IDL's comment
+  const auto status = nlohmann::json::parse(status_schema())["properties"];
+  EXPECT_EQ(status["rejects_by_reason"]["type"], "array");                           // unsigned long [24]
+}
+
+TEST(LiveMessages, StatusAndReplyJsonCarryExactlyTheirSchemasFields) {
+  pvcgel_v1_Status st{};
+  pvcgel_v1_CommandReply r{};
+  const std::pair<nlohmann::json, std::string> cases[] = {{to_json(st), status_schema()}, {to_json(r), reply_schema()}};
+  for (const auto& [encoded, schema_text] : cases) {
+    const auto props = nlohmann::json::parse(schema_text)["properties"];
+    for (const auto& [key, value] : encoded.items()) EXPECT_TRUE(props.contains(key)) << key;
+    EXPECT_EQ(props.size(), encoded.size()) << schema_text.substr(0, 120);
+  }
 }

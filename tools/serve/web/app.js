@@ -22,20 +22,67 @@ let rig = null;
 let lastStatusMs = 0;
 let lastStatus = null;
 
-// Plot data: columns of the decimated samples in the window; exact |e| sums per batch.
-let cols = { t: [], r: [], y: [], e: [], u: [], d: [] };
+// Plot data: the window's plotted samples in typed arrays (no per-batch arrays
+// to collect); exact |e| sums per batch for the statistics.
+const KEYS = ["t", "r", "y", "e", "u", "d"];
+const BATCH_KEYS = { t: "t_s", r: "r_um", y: "y_um", e: "e_um", u: "u_V", d: "d_hat" };
+
+/** Columns of samples in a buffer twice the window's size, appended at the end;
+ *  when the end is reached the live window moves to the front (one copy per
+ *  window), so the plots get contiguous subarray views and nothing is copied per frame. */
+class WindowColumns {
+  constructor(capacity) {
+    this.capacity = capacity;
+    this.cols = Object.fromEntries(KEYS.map((k) => [k, new Float64Array(2 * capacity)]));
+    this.start = 0;
+    this.end = 0;
+  }
+  get length() { return this.end - this.start; }
+  lastT() { return this.length ? this.cols.t[this.end - 1] : null; }
+  clear() { this.start = this.end = 0; }
+  append(b) {
+    const n = b.t_s.length;
+    if (this.length + n > this.capacity) this.grow(2 * (this.length + n));
+    if (this.end + n > 2 * this.capacity) this.compact();
+    for (const k of KEYS) {
+      const src = b[BATCH_KEYS[k]], dst = this.cols[k];
+      // null (a faulted sensor) -> NaN: the canvas skips non-finite points.
+      for (let i = 0; i < n; i++) dst[this.end + i] = src[i] ?? NaN;
+    }
+    this.end += n;
+  }
+  dropBefore(t0) {
+    const t = this.cols.t;
+    while (this.start < this.end && t[this.start] < t0) this.start++;
+  }
+  compact() {
+    for (const k of KEYS) this.cols[k].copyWithin(0, this.start, this.end);
+    this.end -= this.start;
+    this.start = 0;
+  }
+  grow(capacity) {
+    const old = this.cols, from = this.start, to = this.end;
+    this.capacity = capacity;
+    this.cols = Object.fromEntries(KEYS.map((k) => [k, new Float64Array(2 * capacity)]));
+    for (const k of KEYS) this.cols[k].set(old[k].subarray(from, to));
+    this.start = 0;
+    this.end = to - from;
+  }
+  view(k) { return this.cols[k].subarray(this.start, this.end); }
+}
+
+const cols = new WindowColumns(2048);   // grows if a smaller --page-decimation needs more
 let batches = [];             // {t, n, sumAbs, sumSq, max}
 let dirty = false;
 
 function clearData() {
-  cols = { t: [], r: [], y: [], e: [], u: [], d: [] };
+  cols.clear();
   batches = [];
   dirty = true;
 }
 
 const xRange = () => {
-  const t = cols.t;
-  const end = t.length ? t[t.length - 1] : WINDOW_S;
+  const end = cols.lastT() ?? WINDOW_S;
   return [Math.max(0, end - WINDOW_S), Math.max(WINDOW_S, end)];
 };
 
@@ -46,7 +93,12 @@ function makePlot(title, series, yLabel, legend) {
   return new uPlot({
     title, width, height: PLOT_HEIGHT,
     scales: { x: { time: false, range: () => xRange() } },
-    axes: [{ label: "loop time (s)" }, { label: yLabel, space: 20 }],
+    // What a browser without a GPU redraws in software 32 times a second, kept
+    // lean: tick labels every second and every ~30 px (each is text shaped and
+    // rasterised again per frame), lines, grid and ticks 1 px wide (a wider
+    // antialiased stroke of ~1000 points costs several times as much).
+    axes: [{ label: "loop time (s)", space: 90, size: 30, labelSize: 20, grid: { width: 1 }, ticks: { width: 1 } },
+      { label: yLabel, space: 30, grid: { width: 1 }, ticks: { width: 1 } }],
     series: [{ label: "t (s)" }, ...series],
     legend: { show: legend, live: false },
     cursor: { show: false },
@@ -54,16 +106,17 @@ function makePlot(title, series, yLabel, legend) {
 }
 
 const plots = [
-  // y first, r drawn over it: r is dashed so y shows through where they coincide.
-  { plot: makePlot("displacement y (blue) and reference r (black, dashed), um", [{ label: "y (um)", stroke: "#06c", width: 2 }, { label: "r (um)", stroke: "#222", dash: [5, 5] }], "um", true), keys: ["y", "r"] },
+  // r dashed on top of y: both show where they coincide.
+  { plot: makePlot("displacement y (blue) and reference r (black), um", [{ label: "y (um)", stroke: "#06c" }, { label: "r (um)", stroke: "#222", dash: [6, 6] }], "um", true), keys: ["y", "r"] },
   { plot: makePlot("tracking error e = r - y, um", [{ label: "e (um)", stroke: "#c30" }], "um", false), keys: ["e"] },
   { plot: makePlot("amplifier voltage u, V", [{ label: "u (V)", stroke: "#690" }], "V", false), keys: ["u"] },
   { plot: makePlot("disturbance estimate d_hat (linear-block input units)", [{ label: "d_hat", stroke: "#939" }], "d_hat", false), keys: ["d"] },
 ];
 
-// Everything the page changes is changed in one frame, at most one per batch
-// (~36/s), and text only every 250 ms: in a browser without a GPU a frame that
-// changes text (style, layout, paint) costs about as much as drawing the plots.
+// Everything the page changes is changed in one animation frame per batch
+// (pvcgel serve sends 32 a second: >= 30 frames/s, and not more, since in a
+// browser without a GPU every frame, even one that changes nothing, costs
+// about a millisecond of CPU); text only every 250 ms.
 let frameRequested = false;
 function requestFrame() {
   if (frameRequested) return;
@@ -85,7 +138,7 @@ function render(now) {
   frameRequested = false;
   if (dirty) {
     dirty = false;
-    for (const p of plots) p.plot.setData([cols.t, ...p.keys.map((k) => cols[k])]);
+    for (const p of plots) p.plot.setData([cols.view("t"), ...p.keys.map((k) => cols.view(k))]);
     stats.frames++;
   }
   if (now - lastTextMs < TEXT_EVERY_MS) return;
@@ -93,6 +146,7 @@ function render(now) {
   showTracking();
   showStatus();
   setText("samples", String(stats.samples));
+  showRate(now);
 }
 
 window.addEventListener("resize", () => {
@@ -100,17 +154,15 @@ window.addEventListener("resize", () => {
 });
 
 function addBatch(b) {
-  if (b.t_s.length && cols.t.length && b.t_s[0] < cols.t[cols.t.length - 1] - 1) clearData();  // the daemon restarted
-  cols.t.push(...b.t_s); cols.r.push(...b.r_um); cols.y.push(...b.y_um);
-  cols.e.push(...b.e_um); cols.u.push(...b.u_V); cols.d.push(...b.d_hat);
-  const tEnd = cols.t.length ? cols.t[cols.t.length - 1] : 0;
-  let drop = 0;
-  while (drop < cols.t.length && cols.t[drop] < tEnd - WINDOW_S) drop++;
-  if (drop > 0) for (const k of Object.keys(cols)) cols[k].splice(0, drop);
+  const last = cols.lastT();
+  if (b.t_s.length && last !== null && b.t_s[0] < last - 1) clearData();  // the daemon restarted
+  cols.append(b);
+  const tEnd = cols.lastT() ?? 0;
+  cols.dropBefore(tEnd - WINDOW_S);
   batches.push({ t: tEnd, n: b.stats_n, sumAbs: b.sum_abs_e_um, sumSq: b.sum_sq_e_um2, max: b.max_abs_e_um });
   while (batches.length && batches[0].t < tEnd - WINDOW_S) batches.shift();
   stats.samples += b.samples; stats.batches++; stats.gaps += b.gaps;
-  dirty = true;
+  if (b.t_s.length) dirty = true;   // redraw only when there is something new to show
   requestFrame();
 }
 
@@ -134,12 +186,13 @@ function showStatus() {
 // Without data (no daemon) nothing else asks for a frame: look twice a second.
 setInterval(requestFrame, 500);
 
-let lastCount = 0, lastCountMs = Date.now();
-setInterval(() => {
-  const now = Date.now();
-  setText("rate", `(${((stats.samples - lastCount) * 1000 / (now - lastCountMs)).toFixed(0)}/s, ${stats.gaps} lost)`);
+let lastCount = 0, lastCountMs = 0;
+/** The received rate, over about a second, in a text frame. */
+function showRate(now) {
+  if (now - lastCountMs < 1000) return;
+  if (lastCountMs) setText("rate", `(${((stats.samples - lastCount) * 1000 / (now - lastCountMs)).toFixed(0)}/s, ${stats.gaps} lost)`);
   lastCount = stats.samples; lastCountMs = now;
-}, 1000);
+}
 
 function send(obj) { if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(obj)); }
 
