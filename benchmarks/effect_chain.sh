@@ -1,0 +1,206 @@
+#!/bin/bash
+# Issue 14, item 3: one chain, end to end, with the tools a user has (never the truth's parameters):
+#   record with pvcgeld -> pvcgel diagnose -> pvcgeld with the augmented model -> track the paper's references.
+# Run on three simulated rigs whose truth is the paper's model (n = 3, eq. (11)) plus effects the nominal
+# model (config/pvcgeld-sim.toml's [model], n = 2) lacks, and prints mean |e| of inverse_pid_dob_ff with the
+# diagnosed model, without the effects (the nominal model), and the noise floor, with the ratios.
+#
+# Usage: benchmarks/effect_chain.sh [--build DIR] [--out DIR] [--rigs "hysteresis creep both"]
+#                                   [--track-s S] [--settle-s S] [--jobs N] [--plot PNG]
+# The benchmark: the defaults (60 s per reference, mean |e| over 20..60 s as `pvcgel bench paper`).
+# The e2e test (ctest EffectChainE2E) runs it shorter and checks results.tsv and diagnosis.tsv.
+# pvcgeld runs in real time (no accelerated mode): each rig's recording takes 60 s, each reference --track-s;
+# runs go in parallel (--jobs, default 8; a sim pvcgeld needs a few % of a core). DDS is off in every run.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+BUILD=$ROOT/build OUT=$ROOT/out/effect_chain RIGS="hysteresis creep both" TRACK_S=60 SETTLE_S=20 JOBS=8 PLOT=""
+while [ $# -gt 0 ]; do
+  case $1 in
+    --build) BUILD=$2; shift 2 ;;
+    --out) OUT=$2; shift 2 ;;
+    --rigs) RIGS=$2; shift 2 ;;
+    --track-s) TRACK_S=$2; shift 2 ;;
+    --settle-s) SETTLE_S=$2; shift 2 ;;
+    --jobs) JOBS=$2; shift 2 ;;
+    --plot) PLOT=$2; shift 2 ;;
+    *) echo "effect_chain: unknown argument '$1' (see the usage at the top of $0)" >&2; exit 64 ;;
+  esac
+done
+PVCGELD=$BUILD/daemon/pvcgeld PVCGEL=$BUILD/tools/pvcgel
+for b in "$PVCGELD" "$PVCGEL"; do [ -x "$b" ] || { echo "effect_chain: $b not built" >&2; exit 1; }; done
+mkdir -p "$OUT"
+REFERENCES="0.1hz 0.5hz 1hz multi"
+RECORD_S=60
+
+# ------------------------------------------------------------------ configuration files
+# FILE without the listed tables (a table's body ends at the next [header]).
+toml_without() {
+  awk -v drop=" $2 " '/^\[/ { name = $0; gsub(/^\[+|\]+.*$/, "", name); skip = index(drop, " " name " ") > 0 } !skip' "$1"
+}
+# Only the listed tables of FILE (with [[array]] tables), in file order.
+toml_only() {
+  awk -v keep=" $2 " '/^\[/ { name = $0; gsub(/^\[+|\]+.*$/, "", name); on = index(keep, " " name " ") > 0 } on' "$1"
+}
+# The simulated rigs. Hysteresis "at 5% of the peak-to-peak stroke": the quasi-static loop of the truth
+# driven between the voltages that give the paper's y_r1 range (75..125 um, 315..380 V) is at most 2.3 um
+# wide, 5.0% of its 46 um peak-to-peak (Prandtl-Ishlinskii, control/effect.hpp: alpha 0.205 with plays up to
+# 2.08 x 15 V; the width grows about linearly with alpha). Creep at 5% with a 10 s time constant: a
+# Kelvin-Voigt branch 0.05 G(0) / (10 s + 1) in parallel with G (a step settles 5% further, tau 10 s).
+effect_tables() {
+  local hyst='[[sim.truth.effect]]
+name = "hysteresis"
+alpha = 0.205
+threshold_scale_V = 15.0'
+  local creep='[[sim.truth.effect]]
+name = "creep"
+fraction = 0.05
+time_constant_s = 10.0'
+  case $1 in
+    hysteresis) echo "$hyst" ;;
+    creep) echo "$creep" ;;
+    both) printf '%s\n%s\n' "$hyst" "$creep" ;;
+    floor) ;;  # truth = the model: the noise floor
+    *) echo "effect_chain: unknown rig '$1' (hysteresis, creep, both)" >&2; exit 64 ;;
+  esac
+}
+# The rig's configuration: the shipped sim config (its [model] is the rig's nominal model), the built-in
+# Bouc-Wen hysteresis and creep off, the rig's effects added to the truth; DDS off (nothing but loopback
+# anyway, and no participant is needed); overruns never fault (the sim's time is the cycle count, so a late
+# cycle on this shared machine changes nothing but would stop the run).
+rig_config() {
+  local rig=$1
+  toml_without "$ROOT/config/pvcgeld-sim.toml" "sim.hysteresis sim.creep dds run $([ "$rig" = floor ] && echo sim.truth)" |
+    sed -e 's/^overrun_fault_after = .*/overrun_fault_after = 0/' -e "s|^config = \"cyclonedds|config = \"$ROOT/config/cyclonedds|"
+  printf '\n[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n[dds]\nenabled = false\n\n'
+  if [ "$rig" = floor ]; then
+    toml_only "$ROOT/config/pvcgeld-sim.toml" "model" | sed -e 's/^\[model\]/[sim.truth]/' -e '/^io_delay_samples/d'
+  else
+    effect_tables "$rig"
+  fi
+}
+# MODE in a configuration ([controller] mode is the file's only `mode =` key).
+with_mode() { sed -e "s/^mode = .*/mode = \"$2\"/" "$1"; }
+
+# ------------------------------------------------------------------ running pvcgeld, in parallel
+running=0
+throttle() { if [ "$running" -ge "$JOBS" ]; then wait -n || true; running=$((running - 1)); fi; running=$((running + 1)); }
+# pvcgeld CONFIG TRAJECTORY SECONDS RECORDING: the log beside the recording; never stops the script.
+run_daemon() {
+  "$PVCGELD" --config "$1" --trajectory "$2" --duration "$3" --record "$4" > "${4%.csv}.log" 2>&1 || true
+}
+
+# The excitation recorded on each rig (closed loop, the rig's shipped controller inverse_pid_dob): the paper's
+# y_r1 at 0.1 Hz (hysteresis loops), holds at 125 and 75 um (creep: the voltage keeps moving for tens of
+# seconds), and y_r1 at 1 Hz (rate dependence), each joined by 1 s ramps. t_s,r_um every 10 ms.
+excitation_csv() {
+  awk 'function ramp(t, t0, a, b) { return a + (b - a) * (t - t0) }
+       BEGIN { pi = atan2(0, -1); print "t_s,r_um";
+         for (k = 0; k <= 6000; k++) { t = k / 100.0;
+           if (t < 20) r = 100 + 25 * sin(2 * pi * 0.1 * t);
+           else if (t < 21) r = ramp(t, 20, 100, 125); else if (t < 35) r = 125;
+           else if (t < 36) r = ramp(t, 35, 125, 75); else if (t < 48) r = 75;
+           else if (t < 49) r = ramp(t, 48, 75, 100); else r = 100 + 25 * sin(2 * pi * 1.0 * (t - 49));
+           printf "%.2f,%.6f\n", t, r } }'
+}
+
+# ------------------------------------------------------------------ the chain
+excitation_csv > "$OUT/excitation.csv"
+rig_config floor | with_mode /dev/stdin inverse_pid_dob_ff > "$OUT/floor.toml"
+echo "effect_chain: 1/3 recording ${RECORD_S} s on each rig ($RIGS) with pvcgeld" >&2
+for rig in $RIGS; do
+  mkdir -p "$OUT/$rig"
+  rig_config "$rig" > "$OUT/$rig/rig.toml"
+  throttle; run_daemon "$OUT/$rig/rig.toml" "csv:$OUT/excitation.csv" $RECORD_S "$OUT/$rig/recording.csv" &
+done
+wait; running=0
+
+echo "effect_chain: 2/3 pvcgel diagnose --model rig.toml recording.csv" >&2
+for rig in $RIGS; do
+  d=$OUT/$rig
+  # The user's model is the one the rig's configuration ships; diagnose keeps its other tables and writes
+  # [model] + [[model.effect]] (for the controller) and [sim] (its estimate of the rig) to augmented.toml.
+  "$PVCGEL" diagnose --model "$d/rig.toml" --json "$d/diagnosis.json" --out "$d/augmented.toml" \
+    "$d/recording.csv" > "$d/diagnose.txt" 2>&1 || echo "effect_chain: diagnose failed on $rig (see $d/diagnose.txt)" >&2
+  # The rig itself (its [sim] is the truth, never diagnose's estimate of it) with the augmented [model].
+  { toml_without "$d/rig.toml" "model"; echo; toml_only "$d/augmented.toml" "model model.effect"; } > "$d/augmented-rig.toml"
+done
+
+echo "effect_chain: 3/3 tracking the paper's references in inverse_pid_dob_ff, ${TRACK_S} s each" >&2
+for ref in $REFERENCES; do
+  throttle; run_daemon "$OUT/floor.toml" "paper-$ref" "$TRACK_S" "$OUT/floor-$ref.csv" &
+  for rig in $RIGS; do
+    d=$OUT/$rig
+    with_mode "$d/rig.toml" inverse_pid_dob_ff > "$d/nominal-ff.toml"
+    with_mode "$d/augmented-rig.toml" inverse_pid_dob_ff > "$d/augmented-ff.toml"
+    for model in nominal augmented; do
+      throttle; run_daemon "$d/$model-ff.toml" "paper-$ref" "$TRACK_S" "$d/track-$model-$ref.csv" &
+    done
+  done
+done
+wait; running=0
+
+# ------------------------------------------------------------------ results
+# mean |e| over RUNNING rows from SETTLE_S on; "n/a" when the run did not reach them (the log says why).
+mean_abs_e() {
+  [ -s "$1" ] || { echo n/a; return; }
+  awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle && $8 == "RUNNING" { s += ($5 < 0 ? -$5 : $5); n++ }
+    END { if (n > 0) printf "%.4f\n", s / n; else print "n/a" }' "$1"
+}
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { if (a == "n/a" || b == "n/a" || b + 0 <= 0) print "n/a"; else printf "%.2f\n", a / b }'; }
+json_string() { grep -o "\"$2\": \"[^\"]*\"" "$1" 2>/dev/null | head -1 | sed 's/.*: "\(.*\)"/\1/' || true; }
+mixture_names() {
+  grep -o '"mixture": \[[^]]*\]' "$1" 2>/dev/null | grep -o '"name": "[a-z_]*"' | sed 's/.*: "\(.*\)"/\1/' | paste -sd+ - || true
+}
+printf 'rig\treference\tdiagnosed_um\tnominal_um\tfloor_um\n' > "$OUT/results.tsv"
+printf 'rig\tverdict\tmixture\n' > "$OUT/diagnosis.tsv"
+noise_sigma=$(awk -F= '/^noise_sigma_um/ { print $2 + 0 }' "$ROOT/config/pvcgeld-sim.toml")
+echo
+echo "Noise floor: inverse_pid_dob_ff on a rig whose truth equals the model (same noise, same controller);"
+echo "the sensor noise alone has mean |n| = $(awk -v s="$noise_sigma" 'BEGIN { printf "%.4f", s * sqrt(2 / atan2(0, -1)) }') um."
+echo "mean |e| in um from ${SETTLE_S} s to ${TRACK_S} s; ratios: diagnosed / floor (target <= 1.5) and nominal / diagnosed."
+echo
+printf '| rig | diagnosis | reference | diagnosed model | without the effects | noise floor | diagnosed / floor | without / diagnosed |\n'
+printf '| --- | --- | --- | --- | --- | --- | --- | --- |\n'
+for rig in $RIGS; do
+  d=$OUT/$rig
+  verdict=$(json_string "$d/diagnosis.json" verdict); mixture=$(mixture_names "$d/diagnosis.json")
+  printf '%s\t%s\t%s\n' "$rig" "${verdict:-failed}" "${mixture:--}" >> "$OUT/diagnosis.tsv"
+  for ref in $REFERENCES; do
+    aug=$(mean_abs_e "$d/track-augmented-$ref.csv"); nom=$(mean_abs_e "$d/track-nominal-$ref.csv"); floor=$(mean_abs_e "$OUT/floor-$ref.csv")
+    printf '%s\t%s\t%s\t%s\t%s\n' "$rig" "$ref" "$aug" "$nom" "$floor" >> "$OUT/results.tsv"
+    printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$rig" "${mixture:-${verdict:-failed}}" "$ref" "$aug" "$nom" "$floor" \
+      "$(ratio "$aug" "$floor")" "$(ratio "$nom" "$aug")"
+  done
+done
+for rig in $RIGS; do
+  if grep -q "model.effect" "$OUT/$rig/track-augmented-1hz.log" 2>/dev/null; then
+    echo; echo "NOTE: pvcgeld refused the augmented model ($rig): $(grep -m1 "model.effect" "$OUT/$rig/track-augmented-1hz.log")"
+    break
+  fi
+done
+
+# ------------------------------------------------------------------ plot: tracking error before and after
+if [ -n "$PLOT" ]; then
+  plot_data=$OUT/plot.dat
+  : > "$plot_data"
+  for rig in $RIGS; do
+    for model in nominal augmented; do
+      awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle && $1 < settle + 10 && $8 == "RUNNING" { print $1 - settle, $5 }' \
+        "$OUT/$rig/track-$model-multi.csv" >> "$plot_data" 2>/dev/null || true
+      printf '\n\n' >> "$plot_data"
+    done
+  done
+  {
+    echo "set terminal pngcairo size 1100,$((260 * $(echo $RIGS | wc -w) + 40)) font ',10'; set output '$PLOT'"
+    echo "set multiplot layout $(echo $RIGS | wc -w),1 title \"inverse_pid_dob_ff tracking y_r2 (multi-harmonic): error with the nominal model and with the diagnosed model\" noenhanced"
+    echo "set xlabel 't - ${SETTLE_S} s (s)'; set ylabel 'e = r - y (um)'; set grid; set key top right"
+    i=0
+    for rig in $RIGS; do
+      echo "set title \"truth: paper model + $rig\" noenhanced"
+      echo "plot '$plot_data' index $((2 * i)) using 1:2 with lines lw 1 lc rgb '#d95f02' title 'without the effects (nominal model)', '' index $((2 * i + 1)) using 1:2 with lines lw 1 lc rgb '#1b9e77' title 'diagnosed model ([[model.effect]])'"
+      i=$((i + 1))
+    done
+    echo "unset multiplot"
+  } > "$OUT/plot.gp"
+  gnuplot "$OUT/plot.gp" && echo "effect_chain: plot $PLOT" >&2
+fi
