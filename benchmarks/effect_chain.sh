@@ -6,19 +6,20 @@
 # model, without the effects (the nominal model), and the noise floor, with the ratios.
 #
 # Usage: benchmarks/effect_chain.sh [--build DIR] [--out DIR] [--rigs "hysteresis creep both"]
-#                                   [--track-s S] [--settle-s S] [--jobs N] [--plot PNG]
+#                                   [--modes "inverse_pid_dob_ff inverse_pid_dob"] [--track-s S] [--settle-s S] [--jobs N] [--plot PNG]
 # The benchmark: the defaults (60 s per reference, mean |e| over 20..60 s as `pvcgel bench paper`).
 # The e2e test (ctest EffectChainE2E) runs it shorter and checks results.tsv and diagnosis.tsv.
 # pvcgeld runs in real time (no accelerated mode): each rig's recording takes 60 s, each reference --track-s;
 # runs go in parallel (--jobs, default 8; a sim pvcgeld needs a few % of a core). DDS is off in every run.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-BUILD=$ROOT/build OUT=$ROOT/out/effect_chain RIGS="hysteresis creep both" TRACK_S=60 SETTLE_S=20 JOBS=8 PLOT=""
+BUILD=$ROOT/build OUT=$ROOT/out/effect_chain RIGS="hysteresis creep both" MODES=inverse_pid_dob_ff TRACK_S=60 SETTLE_S=20 JOBS=8 PLOT=""
 while [ $# -gt 0 ]; do
   case $1 in
     --build) BUILD=$2; shift 2 ;;
     --out) OUT=$2; shift 2 ;;
     --rigs) RIGS=$2; shift 2 ;;
+    --modes) MODES=$2; shift 2 ;;
     --track-s) TRACK_S=$2; shift 2 ;;
     --settle-s) SETTLE_S=$2; shift 2 ;;
     --jobs) JOBS=$2; shift 2 ;;
@@ -30,7 +31,7 @@ PVCGELD=$BUILD/daemon/pvcgeld PVCGEL=$BUILD/tools/pvcgel
 for b in "$PVCGELD" "$PVCGEL"; do [ -x "$b" ] || { echo "effect_chain: $b not built" >&2; exit 1; }; done
 mkdir -p "$OUT"
 REFERENCES="0.1hz 0.5hz 1hz multi"
-RECORD_S=60
+RECORD_S=40
 
 # ------------------------------------------------------------------ configuration files
 # FILE without the listed tables (a table's body ends at the next [header]).
@@ -89,53 +90,57 @@ run_daemon() {
   "$PVCGELD" --config "$1" --trajectory "$2" --duration "$3" --record "$4" > "${4%.csv}.log" 2>&1 || true
 }
 
-# The excitation recorded on each rig (closed loop, the rig's shipped controller inverse_pid_dob): the paper's
-# y_r1 at 0.1 Hz (hysteresis loops), holds at 125 and 75 um (creep: the voltage keeps moving for tens of
-# seconds), and y_r1 at 1 Hz (rate dependence), each joined by 1 s ramps. t_s,r_um every 10 ms.
-excitation_csv() {
+# What is recorded on each rig, closed loop under the rig's shipped controller (inverse_pid_dob), two
+# recordings of RECORD_S s: the paper's multi-harmonic y_r2 (reversals at three frequencies: hysteresis loops,
+# rate dependence) and steps with holds at 125, 75 and 100 um (creep: the voltage keeps moving for tens of
+# seconds after each step), joined by 1 s ramps (t_s,r_um every 10 ms). Diagnosed together.
+steps_csv() {
   awk 'function ramp(t, t0, a, b) { return a + (b - a) * (t - t0) }
-       BEGIN { pi = atan2(0, -1); print "t_s,r_um";
-         for (k = 0; k <= 6000; k++) { t = k / 100.0;
-           if (t < 20) r = 100 + 25 * sin(2 * pi * 0.1 * t);
-           else if (t < 21) r = ramp(t, 20, 100, 125); else if (t < 35) r = 125;
-           else if (t < 36) r = ramp(t, 35, 125, 75); else if (t < 48) r = 75;
-           else if (t < 49) r = ramp(t, 48, 75, 100); else r = 100 + 25 * sin(2 * pi * 1.0 * (t - 49));
-           printf "%.2f,%.6f\n", t, r } }'
+       BEGIN { print "t_s,r_um";
+         for (k = 0; k <= 4000; k++) { t = k / 100.0;
+           if (t < 2) r = 100; else if (t < 3) r = ramp(t, 2, 100, 125); else if (t < 15) r = 125;
+           else if (t < 16) r = ramp(t, 15, 125, 75); else if (t < 28) r = 75;
+           else if (t < 29) r = ramp(t, 28, 75, 100); else r = 100;
+           printf "%.2f,%.4f\n", t, r } }'
 }
 
 # ------------------------------------------------------------------ the chain
-excitation_csv > "$OUT/excitation.csv"
-rig_config floor | with_mode /dev/stdin inverse_pid_dob_ff > "$OUT/floor.toml"
-echo "effect_chain: 1/3 recording ${RECORD_S} s on each rig ($RIGS) with pvcgeld" >&2
+steps_csv > "$OUT/steps.csv"
+rig_config floor > "$OUT/floor.toml"
+echo "effect_chain: 1/3 recording 2 x ${RECORD_S} s on each rig ($RIGS) with pvcgeld" >&2
 for rig in $RIGS; do
   mkdir -p "$OUT/$rig"
   rig_config "$rig" > "$OUT/$rig/rig.toml"
-  throttle; run_daemon "$OUT/$rig/rig.toml" "csv:$OUT/excitation.csv" $RECORD_S "$OUT/$rig/recording.csv" &
+  throttle; run_daemon "$OUT/$rig/rig.toml" paper-multi $RECORD_S "$OUT/$rig/recording-multi.csv" &
+  throttle; run_daemon "$OUT/$rig/rig.toml" "csv:$OUT/steps.csv" $RECORD_S "$OUT/$rig/recording-steps.csv" &
 done
 wait; running=0
 
-echo "effect_chain: 2/3 pvcgel diagnose --model rig.toml recording.csv" >&2
+echo "effect_chain: 2/3 pvcgel diagnose --model rig.toml recording-multi.csv recording-steps.csv" >&2
 diagnose_rig() {
   local d=$OUT/$1
   # The user's model is the one the rig's configuration ships; diagnose keeps its other tables and writes
   # [model] + [[model.effect]] (for the controller) and [sim] (its estimate of the rig) to augmented.toml.
   "$PVCGEL" diagnose --model "$d/rig.toml" --json "$d/diagnosis.json" --out "$d/augmented.toml" \
-    "$d/recording.csv" > "$d/diagnose.txt" 2>&1 || echo "effect_chain: diagnose failed on $1 (see $d/diagnose.txt)" >&2
+    "$d/recording-multi.csv" "$d/recording-steps.csv" > "$d/diagnose.txt" 2>&1 || echo "effect_chain: diagnose failed on $1 (see $d/diagnose.txt)" >&2
   # The rig itself (its [sim] is the truth, never diagnose's estimate of it) with the augmented [model].
   { toml_without "$d/rig.toml" "model"; echo; toml_only "$d/augmented.toml" "model model.effect"; } > "$d/augmented-rig.toml"
 }
 for rig in $RIGS; do throttle; diagnose_rig "$rig" & done
 wait; running=0
 
-echo "effect_chain: 3/3 tracking the paper's references in inverse_pid_dob_ff, ${TRACK_S} s each" >&2
-for ref in $REFERENCES; do
-  throttle; run_daemon "$OUT/floor.toml" "paper-$ref" "$TRACK_S" "$OUT/floor-$ref.csv" &
-  for rig in $RIGS; do
-    d=$OUT/$rig
-    with_mode "$d/rig.toml" inverse_pid_dob_ff > "$d/nominal-ff.toml"
-    with_mode "$d/augmented-rig.toml" inverse_pid_dob_ff > "$d/augmented-ff.toml"
-    for model in nominal augmented; do
-      throttle; run_daemon "$d/$model-ff.toml" "paper-$ref" "$TRACK_S" "$d/track-$model-$ref.csv" &
+echo "effect_chain: 3/3 tracking the paper's references in $MODES, ${TRACK_S} s each" >&2
+for mode in $MODES; do
+  for ref in $REFERENCES; do
+    with_mode "$OUT/floor.toml" "$mode" > "$OUT/floor-$mode.toml"
+    throttle; run_daemon "$OUT/floor-$mode.toml" "paper-$ref" "$TRACK_S" "$OUT/floor-$mode-$ref.csv" &
+    for rig in $RIGS; do
+      d=$OUT/$rig
+      with_mode "$d/rig.toml" "$mode" > "$d/nominal-$mode.toml"
+      with_mode "$d/augmented-rig.toml" "$mode" > "$d/augmented-$mode.toml"
+      for model in nominal augmented; do
+        throttle; run_daemon "$d/$model-$mode.toml" "paper-$ref" "$TRACK_S" "$d/track-$model-$mode-$ref.csv" &
+      done
     done
   done
 done
@@ -153,53 +158,64 @@ json_string() { grep -o "\"$2\": \"[^\"]*\"" "$1" 2>/dev/null | head -1 | sed 's
 mixture_names() {
   grep -o '"mixture": \[[^]]*\]' "$1" 2>/dev/null | grep -o '"name": "[a-z_]*"' | sed 's/.*: "\(.*\)"/\1/' | paste -sd+ - || true
 }
-printf 'rig\treference\tdiagnosed_um\tnominal_um\tfloor_um\n' > "$OUT/results.tsv"
+printf 'mode\trig\treference\tdiagnosed_um\tnominal_um\tfloor_um\n' > "$OUT/results.tsv"
 printf 'rig\tverdict\tmixture\n' > "$OUT/diagnosis.tsv"
+for rig in $RIGS; do
+  verdict=$(json_string "$OUT/$rig/diagnosis.json" verdict); mixture=$(mixture_names "$OUT/$rig/diagnosis.json")
+  printf '%s\t%s\t%s\n' "$rig" "${verdict:-failed}" "${mixture:--}" >> "$OUT/diagnosis.tsv"
+done
 noise_sigma=$(awk -F= '/^noise_sigma_um/ { print $2 + 0 }' "$ROOT/config/pvcgeld-sim.toml")
 echo
-echo "Noise floor: inverse_pid_dob_ff on a rig whose truth equals the model (same noise, same controller);"
+echo "Noise floor: the same controller on a rig whose truth equals the model (same sensor noise);"
 echo "the sensor noise alone has mean |n| = $(awk -v s="$noise_sigma" 'BEGIN { printf "%.4f", s * sqrt(2 / atan2(0, -1)) }') um."
-echo "mean |e| in um from ${SETTLE_S} s to ${TRACK_S} s; ratios: diagnosed / floor (target <= 1.5) and nominal / diagnosed."
-echo
-printf '| rig | diagnosis | reference | diagnosed model | without the effects | noise floor | diagnosed / floor | without / diagnosed |\n'
-printf '| --- | --- | --- | --- | --- | --- | --- | --- |\n'
-for rig in $RIGS; do
-  d=$OUT/$rig
-  verdict=$(json_string "$d/diagnosis.json" verdict); mixture=$(mixture_names "$d/diagnosis.json")
-  printf '%s\t%s\t%s\n' "$rig" "${verdict:-failed}" "${mixture:--}" >> "$OUT/diagnosis.tsv"
-  for ref in $REFERENCES; do
-    aug=$(mean_abs_e "$d/track-augmented-$ref.csv"); nom=$(mean_abs_e "$d/track-nominal-$ref.csv"); floor=$(mean_abs_e "$OUT/floor-$ref.csv")
-    printf '%s\t%s\t%s\t%s\t%s\n' "$rig" "$ref" "$aug" "$nom" "$floor" >> "$OUT/results.tsv"
-    printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$rig" "${mixture:-${verdict:-failed}}" "$ref" "$aug" "$nom" "$floor" \
-      "$(ratio "$aug" "$floor")" "$(ratio "$nom" "$aug")"
-  done
+echo "mean |e| in um from ${SETTLE_S} s to the end of each ${TRACK_S} s run; ratios: diagnosed / floor (target <= 1.5"
+echo "for inverse_pid_dob_ff) and without / diagnosed (> 1: the diagnosed model tracks better)."
+for mode in $MODES; do
+  echo; echo "$mode:"; echo
+  printf '| rig | diagnosis | reference | diagnosed model | without the effects | noise floor | diagnosed / floor | without / diagnosed |\n'
+  printf '| --- | --- | --- | --- | --- | --- | --- | --- |\n'
+  while IFS=$'\t' read -r rig verdict mixture; do
+    [ "$rig" = rig ] && continue
+    for ref in $REFERENCES; do
+      d=$OUT/$rig
+      aug=$(mean_abs_e "$d/track-augmented-$mode-$ref.csv"); nom=$(mean_abs_e "$d/track-nominal-$mode-$ref.csv")
+      floor=$(mean_abs_e "$OUT/floor-$mode-$ref.csv")
+      printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$mode" "$rig" "$ref" "$aug" "$nom" "$floor" >> "$OUT/results.tsv"
+      printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$rig" "$([ "$mixture" = - ] && echo "$verdict" || echo "$mixture")" \
+        "$ref" "$aug" "$nom" "$floor" "$(ratio "$aug" "$floor")" "$(ratio "$nom" "$aug")"
+    done
+  done < "$OUT/diagnosis.tsv"
 done
-for rig in $RIGS; do
-  if grep -q "model.effect" "$OUT/$rig/track-augmented-1hz.log" 2>/dev/null; then
-    echo; echo "NOTE: pvcgeld refused the augmented model ($rig): $(grep -m1 "model.effect" "$OUT/$rig/track-augmented-1hz.log")"
-    break
+# Say why a run is missing or faulted (its log has pvcgeld's reason).
+for log in "$OUT"/*/track-*.log "$OUT"/floor-*.log "$OUT"/*/recording-*.log; do
+  if grep -q "configuration error\|fault: [a-z]" "$log" && ! grep -q "fault: none" "$log"; then
+    echo; echo "NOTE: $log: $(grep -m1 "configuration error\|fault: [a-z]" "$log")"
   fi
 done
-
 # ------------------------------------------------------------------ plot: tracking error before and after
-if [ -n "$PLOT" ]; then
+# The first mode, the paper's 1 Hz reference (where the effects show most), 5 s after the settling time.
+PLOT_MODE=${MODES%% *}
+if [ -n "$PLOT" ] && [ "$(mean_abs_e "$OUT/${RIGS%% *}/track-augmented-$PLOT_MODE-1hz.csv")" = n/a ]; then
+  echo "effect_chain: no plot: the augmented runs did not happen" >&2
+elif [ -n "$PLOT" ]; then
   plot_data=$OUT/plot.dat
   : > "$plot_data"
   for rig in $RIGS; do
     for model in nominal augmented; do
-      awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle && $1 < settle + 10 && $8 == "RUNNING" { print $1 - settle, $5 }' \
-        "$OUT/$rig/track-$model-multi.csv" >> "$plot_data" 2>/dev/null || true
+      awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle && $1 < settle + 5 && $8 == "RUNNING" { print $1 - settle, $5 }' \
+        "$OUT/$rig/track-$model-$PLOT_MODE-1hz.csv" >> "$plot_data"
       printf '\n\n' >> "$plot_data"
     done
   done
+  n_rigs=$(echo $RIGS | wc -w)
   {
-    echo "set terminal pngcairo size 1100,$((260 * $(echo $RIGS | wc -w) + 40)) font ',10'; set output '$PLOT'"
-    echo "set multiplot layout $(echo $RIGS | wc -w),1 title \"inverse_pid_dob_ff tracking y_r2 (multi-harmonic): error with the nominal model and with the diagnosed model\" noenhanced"
+    echo "set terminal pngcairo size 1100,$((250 * n_rigs + 40)) font ',10'; set output '$PLOT'"
+    echo "set multiplot layout $n_rigs,1 title \"$PLOT_MODE tracking the paper's y_r1 at 1 Hz: error without and with the diagnosed effects\" noenhanced"
     echo "set xlabel 't - ${SETTLE_S} s (s)'; set ylabel 'e = r - y (um)'; set grid; set key top right"
     i=0
     for rig in $RIGS; do
       echo "set title \"truth: paper model + $rig\" noenhanced"
-      echo "plot '$plot_data' index $((2 * i)) using 1:2 with lines lw 1 lc rgb '#d95f02' title 'without the effects (nominal model)', '' index $((2 * i + 1)) using 1:2 with lines lw 1 lc rgb '#1b9e77' title 'diagnosed model ([[model.effect]])'"
+      echo "plot '$plot_data' index $((2 * i)) using 1:2 with lines lw 1 lc rgb '#d95f02' title 'without the effects (nominal [model])', '' index $((2 * i + 1)) using 1:2 with lines lw 1 lc rgb '#1b9e77' title 'diagnosed model ([model] + [[model.effect]])'"
       i=$((i + 1))
     done
     echo "unset multiplot"
