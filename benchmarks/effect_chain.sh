@@ -186,12 +186,12 @@ for mode in $MODES; do
     done
   done < "$OUT/diagnosis.tsv"
 done
-# Say why a run is missing or faulted (its log has pvcgeld's reason).
+# Say why runs are missing or faulted (their logs have pvcgeld's reason): each reason once, with a count.
 for log in "$OUT"/*/track-*.log "$OUT"/floor-*.log "$OUT"/*/recording-*.log; do
   if grep -q "configuration error\|fault: [a-z]" "$log" && ! grep -q "fault: none" "$log"; then
-    echo; echo "NOTE: $log: $(grep -m1 "configuration error\|fault: [a-z]" "$log")"
+    grep -m1 -o "configuration error.*(in\|fault: [a-z_]*" "$log" | sed 's/ (in$//'
   fi
-done
+done | sort | uniq -c | while read -r count reason; do echo; echo "NOTE: $count runs: pvcgeld: $reason"; done
 # ------------------------------------------------------------------ plot: tracking error before and after
 # The first mode, the paper's 1 Hz reference (where the effects show most), 5 s after the settling time.
 PLOT_MODE=${MODES%% *}
@@ -200,22 +200,28 @@ if [ -n "$PLOT" ] && [ "$(mean_abs_e "$OUT/${RIGS%% *}/track-augmented-$PLOT_MOD
 elif [ -n "$PLOT" ]; then
   plot_data=$OUT/plot.dat
   : > "$plot_data"
+  # e averaged over 20 ms (centred): the sensor noise (mean |n| 0.04 um) would hide the effects' systematic error.
+  smoothed_error() {
+    awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle - 0.01 && $1 < settle + 5.01 && $8 == "RUNNING" {
+        t[n] = $1; e[n] = $5; n++ }
+      END { for (i = 10; i < n - 10; i++) { s = 0; for (j = -10; j < 10; j++) s += e[i + j]; print t[i] - settle, s / 20 } }' "$1"
+  }
   for rig in $RIGS; do
-    for model in nominal augmented; do
-      awk -F, -v settle="$SETTLE_S" '/^#/ || /^t_s/ { next } $1 >= settle && $1 < settle + 5 && $8 == "RUNNING" { print $1 - settle, $5 }' \
-        "$OUT/$rig/track-$model-$PLOT_MODE-1hz.csv" >> "$plot_data"
+    for file in "$OUT/$rig/track-nominal-$PLOT_MODE-1hz.csv" "$OUT/$rig/track-augmented-$PLOT_MODE-1hz.csv" \
+                "$OUT/floor-$PLOT_MODE-1hz.csv"; do
+      smoothed_error "$file" >> "$plot_data"
       printf '\n\n' >> "$plot_data"
     done
   done
   n_rigs=$(echo $RIGS | wc -w)
   {
     echo "set terminal pngcairo size 1100,$((250 * n_rigs + 40)) font ',10'; set output '$PLOT'"
-    echo "set multiplot layout $n_rigs,1 title \"$PLOT_MODE tracking the paper's y_r1 at 1 Hz: error without and with the diagnosed effects\" noenhanced"
-    echo "set xlabel 't - ${SETTLE_S} s (s)'; set ylabel 'e = r - y (um)'; set grid; set key top right"
+    echo "set multiplot layout $n_rigs,1 title \"$PLOT_MODE tracking the paper's y_r1 at 1 Hz: error (20 ms mean) without and with the diagnosed effects\" noenhanced"
+    echo "set xlabel 't - ${SETTLE_S} s (s)'; set ylabel 'e = r - y, 20 ms mean (um)'; set grid; set key below horizontal"
     i=0
     for rig in $RIGS; do
       echo "set title \"truth: paper model + $rig\" noenhanced"
-      echo "plot '$plot_data' index $((2 * i)) using 1:2 with lines lw 1 lc rgb '#d95f02' title 'without the effects (nominal [model])', '' index $((2 * i + 1)) using 1:2 with lines lw 1 lc rgb '#1b9e77' title 'diagnosed model ([model] + [[model.effect]])'"
+      echo "plot '$plot_data' index $((3 * i + 2)) using 1:2 with lines lw 1 lc rgb '#999999' title 'noise floor rig (truth = model)', '' index $((3 * i)) using 1:2 with lines lw 2 lc rgb '#d95f02' title 'without the effects (nominal [model])', '' index $((3 * i + 1)) using 1:2 with lines lw 2 lc rgb '#1b9e77' title 'diagnosed model ([model] + [[model.effect]])'"
       i=$((i + 1))
     done
     echo "unset multiplot"
