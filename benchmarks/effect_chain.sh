@@ -9,7 +9,7 @@
 #                                   [--modes "inverse_pid_dob_ff inverse_pid_dob"] [--track-s S] [--settle-s S] [--jobs N] [--plot PNG]
 # The benchmark: the defaults (60 s per reference, mean |e| over 20..60 s as `pvcgel bench paper`).
 # The e2e test (ctest EffectChainE2E) runs it shorter and checks results.tsv and diagnosis.tsv.
-# pvcgeld runs in real time (no accelerated mode): each rig's recording takes 60 s, each reference --track-s;
+# pvcgeld runs in real time (no accelerated mode): two 40 s recordings per rig, then --track-s per reference;
 # runs go in parallel (--jobs, default 8; a sim pvcgeld needs a few % of a core). DDS is off in every run.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -65,8 +65,8 @@ time_constant_s = 10.0'
   esac
 }
 # The rig's configuration: the shipped sim config with its truth (the paper's model, Table II n = 3) as the
-# rig's nominal [model], what `pvcgel ident` identifies on this rig without effects (its held-out choice), so
-# the added effects are all the model lacks; the controller stays 2% below f's turnover at 862 V, as ident
+# rig's nominal [model] (the paper's identified model, exact for this truth without its effects), so the
+# added effects are all the model lacks; the controller stays 2% below f's turnover at 862 V, as ident
 # writes it. The built-in Bouc-Wen hysteresis and creep are off, the rig's effects are added to the truth;
 # DDS is off (no participant is needed); overruns never fault (the sim's time is the cycle count, so a late
 # cycle on this shared machine changes nothing but would stop the run). "floor": the truth equals the model.
