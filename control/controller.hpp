@@ -89,13 +89,14 @@ struct ControlOutput {
 /// Signals (paper Fig. 4): y measured, r the reference, G_d the sampled linear
 /// model with its delay r_d, f the static nonlinearity, C the PID. With effects
 /// (`[[model.effect]]`, EffectCompensator) the loop works on the linear block's
-/// output, r_lin = S^-1(r - drift), y_lin = S^-1(y - drift) (S the saturation;
-/// identity without those effects), e = r_lin - y_lin; H is the input-side chain
-/// (slew limit, dead zone, hysteresis; identity without them), G_d includes creep,
-/// a resonance with a direct fraction and whole samples of extra delay.
+/// output, r_lin = S^-1(r - drift) - creep, y_lin = S^-1(y - drift) - creep (S the
+/// saturation, creep predicted from the applied input; identities without those
+/// effects), e = r_lin - y_lin; H is the input-side chain (slew limit, dead zone,
+/// hysteresis; identity without them); G_d includes a resonance with a direct
+/// fraction and whole samples of extra delay.
 ///  - pid:                u = C e. No model inverse, so the input-side effects are
 ///                        not compensated (by design: it is the paper's baseline); its
-///                        tuning plant f'(u_op) G_d includes the linear effects.
+///                        tuning plant f'(u_op) G_d includes a resonance and the delay.
 ///  - inverse_pid:        v = C e,                    u = H^-1(f^-1(v)).
 ///  - inverse_pid_dob:    v = C e - d_hat,            u = H^-1(f^-1(v)),
 ///                        d_hat = Q[G_d^-1 y_lin] - Q[z^-r_d v_applied].
