@@ -6,10 +6,13 @@
 #include <array>
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <span>
 #include <string_view>
+#include <vector>
 
 #include "control/disturbance_observer.hpp"
+#include "control/effect_compensator.hpp"
 #include "control/enum_table.hpp"
 #include "control/hammerstein_model.hpp"
 #include "control/inverse_correction.hpp"
@@ -39,6 +42,9 @@ constexpr std::string_view to_string(ControllerMode m) noexcept { return kContro
 /// Inverse of to_string.
 std::optional<ControllerMode> parse_mode(std::string_view name) noexcept;
 
+/// Reference samples beyond r[k] pvcgeld's loop can provide.
+inline constexpr int kMaxPreviewSamples = 15;
+
 /// Everything the controller needs besides the model. Checked by the constructor.
 struct ControllerConfig {
   double sample_time_s = 1e-3;
@@ -60,6 +66,12 @@ struct ControllerConfig {
   /// Tuning on what the loop really sees is what makes modes comparable.
   std::array<double, 4> tuning_gain_scale{1.0, 1.0, 1.0, 1.0};
   double antiwindup_tracking_time_s = 0.0;  ///< 0: automatic
+  /// Effects the model carries (`[[model.effect]]`, dominant first), compensated
+  /// by the inverse modes (EffectCompensator says how; some are refused).
+  std::vector<Effect> effects{};
+  /// Most reference samples beyond r[k] the caller can give (pvcgeld's preview
+  /// buffer holds 16 samples: r[k] and 15 ahead); a delay needing more is refused.
+  int max_preview_samples = kMaxPreviewSamples;
 };
 
 /// Result of one controller step.
@@ -77,6 +89,27 @@ struct ControlOutput {
 /// One controller instance, any of the four modes, switchable bumplessly.
 /// Construction validates and designs everything (may throw ConfigError);
 /// `step()` is real-time safe: no allocation, no exceptions, no locks, no I/O.
+///
+/// Signals (paper Fig. 4): y measured, r the reference, G_d the sampled linear
+/// model with its delay r_d, f the static nonlinearity, C the PID. With effects
+/// (`[[model.effect]]`, EffectCompensator) the loop works on the linear block's
+/// output, r_lin = S^-1(r - drift) - creep, y_lin = S^-1(y - drift) - creep (S the
+/// saturation, creep predicted from the applied input; identities without those
+/// effects), e = r_lin - y_lin; H is the input-side chain (slew limit, dead zone,
+/// hysteresis; identity without them); G_d includes a resonance with a direct
+/// fraction and whole samples of extra delay.
+///  - pid:                u = C e. No model inverse, so the input-side effects are
+///                        not compensated (by design: it is the paper's baseline); its
+///                        tuning plant f'(u_op) G_d includes a resonance and the delay.
+///  - inverse_pid:        v = C e,                    u = H^-1(f^-1(v)).
+///  - inverse_pid_dob:    v = C e - d_hat,            u = H^-1(f^-1(v)),
+///                        d_hat = Q[G_d^-1 y_lin] - Q[z^-r_d v_applied].
+///  - inverse_pid_dob_ff: v = C e + v_ff - d_hat,     u = H^-1(f^-1(p^-1(v))),
+///                        v_ff = G_d^-1 r_lin[k + r_d] (read between two preview
+///                        samples for a fractional extra delay), p the learned
+///                        inverse correction (InverseCorrection).
+/// In every mode the output stage clamps and slew-limits u; what was applied,
+/// mapped back through f(H(u)) (and p), feeds the PID's anti-windup and the DOB.
 class Controller final {
  public:
   Controller(const HammersteinModel& model, const ControllerConfig& config);
@@ -96,8 +129,12 @@ class Controller final {
   void set_applied_voltage(double V) noexcept { output_.reset(V); }
   /// Voltage applied in the last step (or set by reset_steady_state).
   [[nodiscard]] double last_voltage_V() const noexcept { return output_.last_V(); }
-  /// Reference samples beyond r[k] the feedforward uses.
-  [[nodiscard]] int preview_samples() const noexcept { return ff_.preview_samples(); }
+  /// Reference samples beyond r[k] the feedforward uses (more with a delay effect).
+  [[nodiscard]] int preview_samples() const noexcept {
+    return ff_.preview_samples() + (comp_.extra_delay_fraction() > 0.0 ? 1 : 0);
+  }
+  /// The effects compensated (model.effect).
+  [[nodiscard]] const EffectCompensator& compensator() const noexcept { return comp_; }
   /// Gains in use for a mode.
   [[nodiscard]] const PidGains& gains(ControllerMode m) const noexcept {
     return gains_[static_cast<size_t>(m)];
@@ -114,11 +151,30 @@ class Controller final {
   [[nodiscard]] const DiscretePlantModel& plant_model() const noexcept { return plant_; }
 
  private:
+  /// Tunes (or checks) every mode's PID on its design plant.
+  void tune_modes();
+  /// The plant and the observers' view of the signals for one sample.
+  struct Sample {
+    double e_lin = 0.0;  ///< r_lin - y_lin, what the PID sees
+    double v_ff = 0.0, d_hat = 0.0;
+  };
   [[nodiscard]] double linear_input_for(double voltage_V, ControllerMode m) const noexcept;
   [[nodiscard]] double voltage_for(double v, ControllerMode m) const noexcept;
+  /// Terms added to the PID output in mode m (feedforward, minus the DOB's estimate).
+  [[nodiscard]] static double law_offset(ControllerMode m, const Sample& s) noexcept;
+  /// Runs the observers and the feedforward (every mode, so a switch finds them settled).
+  Sample observe(std::span<const double> preview, double y_lin) noexcept;
+  /// Applies a pending mode switch without a voltage step.
+  void switch_mode_bumpless(const Sample& s) noexcept;
+  /// The voltage law of the current mode; fills the output, returns the PID output
+  /// and its applied equivalent.
+  std::pair<double, double> apply_law(const Sample& s, ControlOutput& out) noexcept;
+  /// Reports what was applied to the PID, the DOB, the correction and the compensator.
+  void commit(const Sample& s, double c, double applied_equivalent, double voltage_V) noexcept;
 
   ControllerConfig cfg_;
-  HammersteinModel model_;
+  EffectCompensator comp_;
+  HammersteinModel model_;  ///< f, and G with the linear effects folded in
   DiscretePlantModel plant_;
   PolynomialInverse inverse_;
   DisturbanceObserver dob_;

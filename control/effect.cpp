@@ -16,10 +16,6 @@ constexpr std::array<std::string_view, 11> kNames{"none",  "hysteresis", "creep"
                                                   "saturation", "delay", "asymmetric_dynamics", "slew_limit",
                                                   "resonance",  "drift", "bias_dependent_dynamics"};
 
-/// Play thresholds at the quantiles of an exponential distribution (mean 1):
-/// the lag after a reversal grows linearly, then saturates exponentially.
-constexpr std::array<double, 8> kPlayQuantiles{0.0645, 0.2076, 0.3677, 0.5596, 0.7985, 1.0986, 1.5041, 2.0794};
-
 std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b) {
   if (a.size() < b.size()) std::swap(a, b);
   const size_t off = a.size() - b.size();
@@ -27,13 +23,11 @@ std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b
   return a;
 }
 
-/// Kelvin-Voigt creep branches: one at tau, or three (fraction / 3 each) spread
-/// log-uniformly over `spread` decades around tau (log-type creep).
-std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p) {
-  if (!(p[2] > 0.0)) return {{p[0], p[1]}};
-  const double half = std::pow(10.0, 0.5 * p[2]);
-  return {{p[0] / 3.0, p[1] / half}, {p[0] / 3.0, p[1]}, {p[0] / 3.0, p[1] * half}};
-}
+}  // namespace
+
+std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
+
+namespace {
 
 /// The linear block with the effects' LTI parts folded in (creep branches in
 /// parallel, structural mode in series), so one exact ZOH covers it.
@@ -58,13 +52,23 @@ TransferFunction linear_block(const TransferFunction& G, bool creep, const std::
   return TransferFunction(num, den);
 }
 
-/// No response up to d, linear catch-up to u over the next w volts, then u.
-double dead_zone(double u, double d, double w) noexcept {
-  const double a = std::abs(u);
-  return std::copysign(a <= d ? 0.0 : (a <= d + w ? (a - d) * (d + w) / w : a), u);
+}  // namespace
+
+std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p) {
+  if (!(p[2] > 0.0)) return {{p[0], p[1]}};
+  const double half = std::pow(10.0, 0.5 * p[2]);
+  return {{p[0] / 3.0, p[1] / half}, {p[0] / 3.0, p[1]}, {p[0] / 3.0, p[1] * half}};
 }
 
-}  // namespace
+TransferFunction linear_block(const TransferFunction& G, std::span<const Effect> effects) {
+  std::array<double, kMaxEffectParams> creep{}, mode{};
+  bool has_creep = false, has_mode = false;
+  for (const auto& e : effects) {
+    if (e.kind == EffectKind::creep) has_creep = true, creep = e.p;
+    if (e.kind == EffectKind::resonance) has_mode = true, mode = e.p;
+  }
+  return linear_block(G, has_creep, creep, has_mode, mode);
+}
 
 std::string_view to_string(EffectKind kind) noexcept { return kNames[static_cast<size_t>(kind)]; }
 
@@ -268,13 +272,8 @@ double AugmentedPlant::input_stage(double x) noexcept {
   if (has(EffectKind::slew_limit)) {
     // The amplifier ramps at the slew rate inside the sample: hold its mean over the sample.
     const double cap = p(EffectKind::slew_limit)[0] * Ts_, e = x - slew_state_;
-    if (std::abs(e) <= cap) {
-      x -= 0.5 * e * std::abs(e) / cap;
-      slew_state_ += e;
-    } else {
-      x = slew_state_ + std::copysign(0.5 * cap, e);
-      slew_state_ += std::copysign(cap, e);
-    }
+    x = slew_state_ + slew_mean_offset(e, cap);
+    slew_state_ += slew_state_step(e, cap);
   }
   if (has(EffectKind::dead_zone)) x = dead_zone(x, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
   if (has(EffectKind::hysteresis)) {

@@ -6,6 +6,7 @@
 /// simulated rig runs after a diagnosis).
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -13,6 +14,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "control/hammerstein_model.hpp"
@@ -93,6 +95,40 @@ struct Effect {
   std::array<double, kMaxEffectParams> p{};
 };
 
+/// Number of play operators of the hysteresis effect.
+inline constexpr int kHysteresisPlays = 8;
+/// Play thresholds r_i = threshold_scale_V * kPlayQuantiles[i] (ascending), the
+/// quantiles of an exponential distribution (mean 1): the lag after a reversal
+/// grows linearly, then saturates exponentially.
+inline constexpr std::array<double, kHysteresisPlays> kPlayQuantiles{0.0645, 0.2076, 0.3677, 0.5596,
+                                                                     0.7985, 1.0986, 1.5041, 2.0794};
+
+/// The dead zone effect: no response up to d, linear catch-up to u over the
+/// next w volts, then u (odd, for bipolar drive).
+inline double dead_zone(double u_V, double d_V, double w_V) noexcept {
+  const double a = std::abs(u_V);
+  return std::copysign(a <= d_V ? 0.0 : (a <= d_V + w_V ? (a - d_V) * (d_V + w_V) / w_V : a), u_V);
+}
+
+/// The slew-limit effect over one sample: the amplifier ramps from its state
+/// toward the command (difference e) at most `cap` volts per sample; returns
+/// the mean over the sample relative to the state (what the gel sees).
+inline double slew_mean_offset(double e_V, double cap_V) noexcept {
+  return std::abs(e_V) <= cap_V ? e_V - 0.5 * e_V * std::abs(e_V) / cap_V : std::copysign(0.5 * cap_V, e_V);
+}
+/// ... and the state's move over the sample.
+inline double slew_state_step(double e_V, double cap_V) noexcept { return std::clamp(e_V, -cap_V, cap_V); }
+
+/// Kelvin-Voigt creep branches (fraction of G(0), time constant in s) of a creep
+/// effect's parameters: one at tau, or three (fraction / 3 each) spread
+/// log-uniformly over `spread_decades` around tau (log-type creep).
+std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
+
+/// G with the linear effects of `effects` folded in (creep branches in parallel,
+/// a structural mode in series), the linear block AugmentedPlant runs; G itself
+/// when neither is present.
+TransferFunction linear_block(const TransferFunction& G, std::span<const Effect> effects);
+
 /// Parameters of `kind` with bounds and fit starts, scaled to the data.
 std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& scale);
 
@@ -155,7 +191,7 @@ class AugmentedPlant final {
  private:
   static constexpr int kMaxOrder = 9;
   static constexpr size_t kKinds = 11;
-  static constexpr int kPlays = 8;
+  static constexpr int kPlays = kHysteresisPlays;
   static constexpr int kDelayLine = kDelayLineSamples;
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxOrder, 1>;

@@ -221,29 +221,54 @@ std::string augmented_model_path(const DiagnoseArgs& a) {
   return "";
 }
 
+namespace {
+
+/// `[[KEY]]` tables for the diagnosed effects, dominant first (the format of README "Effect tables").
+std::string effect_tables_toml(const std::vector<Effect>& effects, const std::string& key) {
+  std::ostringstream s;
+  for (const auto& e : effects) {
+    const auto specs = parameter_specs(e.kind, DataScale::unbounded(1e-3));
+    s << "\n# " << physical_meaning(e.kind) << ".\n[[" << key << "]]\nname = " << quoted(std::string(to_string(e.kind))) << "\n";
+    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << number_or_null(e.p[i], "%.8g") << "\n";
+  }
+  return s.str();
+}
+
+}  // namespace
+
 std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, const std::string& comment) {
-  const auto& m = lm.model;
+  const auto& nr = r.nominal_refit;
   std::ostringstream s;
   std::istringstream in(comment);
   for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
   const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
-  s << "#\n# [model] is the nominal model the recordings were compared with (what the controller uses).\n"
-    << "# [sim.truth] is that model with the nuisance refit (overall gain " << number_or_null(r.nominal_refit.gain, "%.4g")
-    << ", G's time constants x " << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f's nonlinear coefficients x "
-    << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ") plus the diagnosed effects\n"
-    << "# ([[sim.truth.effect]], dominant first), so\n"
+  // The effects' parameters were fitted jointly with this refit: they describe the rig only together with it.
+  auto refit = refit_model(lm.model, nr.time_scale, nr.poly_shape);
+  std::vector<double> poly = refit.f.coefficients();
+  for (double& c : poly) c *= nr.gain;
+  refit.f = control::OddPolynomial(poly);
+  s << "#\n# [model] is what the controller uses: the model file's nominal model with the refit the diagnosis made\n"
+    << "# (overall gain x " << number_or_null(nr.gain, "%.4g") << ", G's time constants x " << number_or_null(nr.time_scale, "%.4g")
+    << ", f's nonlinear coefficients x " << number_or_null(nr.poly_shape, "%.4g") << "; "
+    << (r.mixture.empty() ? "the nuisance-only refit, no effect named" : "fitted jointly with the effects below") << ")\n"
+    << "# and [[model.effect]], the diagnosed effects, dominant first: a controller in a mode that uses f^-1\n"
+    << "# compensates them. The effects' parameters hold only together with this refit, so both go together.\n"
+    << "# The nominal model as the file stated it: poly = " << toml_array(lm.model.f.coefficients())
+    << ", G_num = " << toml_array(lm.model.G.num()) << ", G_den = " << toml_array(lm.model.G.den()) << ".\n"
+    << "# [sim.truth] is the same model with the same effects ([[sim.truth.effect]]), so\n"
     << "#   pvcgeld --config THIS_FILE   (sim backend)\n"
     << "# simulates the rig the recordings came from; [sim] noise is the noise estimated from them.\n";
   if (!lm.io_delay_declared)
     s << "# io_delay_samples: not declared in the model file; estimated " << number_or_null(r.alignment.io_delay_samples, "%.3g")
       << " samples from the data (rounded here).\n";
   if (!lm.other_tables.empty()) s << "# The model file's other tables follow [model] unchanged.\n";
-  s << "\n";
-  const std::string model_keys = "poly = " + toml_array(m.f.coefficients()) + "\nG_num = " + toml_array(m.G.num()) +
-                                 "\nG_den = " + toml_array(m.G.den()) + "\n";
-  s << "[model]\n" << model_keys << "io_delay_samples = " << io << "\n\n";
+  const std::string model_keys = "poly = " + toml_array(poly) + "\nG_num = " + toml_array(refit.G.num()) +
+                                 "\nG_den = " + toml_array(refit.G.den()) + "\n";
+  s << "\n[model]\n" << model_keys << "io_delay_samples = " << io << "\n";
+  if (r.mixture.empty()) s << "\n# No effect to compensate (verdict: " << r.verdict << ").\n";
+  s << effect_tables_toml(r.mixture, "model.effect") << "\n";
   if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
-  const auto turn = m.f.first_turnover(1000.0);
+  const auto turn = refit.f.first_turnover(1000.0);
   if (turn && lm.other_tables.find("[controller]") == std::string::npos) {
     // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
     s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
@@ -253,18 +278,9 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
     << "\nquantization_um = 0.0\n\n"
     << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effects replace them.\n"
     << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
-  const auto truth = refit_model(m, r.nominal_refit.time_scale, r.nominal_refit.poly_shape);
-  std::vector<double> poly = truth.f.coefficients();
-  for (double& c : poly) c *= r.nominal_refit.gain;
-  const auto& G = truth.G;
-  s << "[sim.truth]\npoly = " << toml_array(poly) << "\nG_num = " << toml_array(G.num()) << "\nG_den = " << toml_array(G.den())
-    << "\n";
+  s << "[sim.truth]\n" << model_keys;
   if (r.mixture.empty()) s << "\n# No effect added (verdict: " << r.verdict << ").\n";
-  for (const auto& e : r.mixture) {
-    const auto specs = parameter_specs(e.kind, DataScale::unbounded(1e-3));
-    s << "\n# " << physical_meaning(e.kind) << ".\n[[sim.truth.effect]]\nname = " << quoted(std::string(to_string(e.kind))) << "\n";
-    for (size_t i = 0; i < specs.size(); ++i) s << specs[i].name << " = " << number_or_null(e.p[i], "%.8g") << "\n";
-  }
+  s << effect_tables_toml(r.mixture, "sim.truth.effect");
   return s.str();
 }
 

@@ -42,11 +42,12 @@ LoadedModel load_model(const std::string& path);
 /// JSON (REPORT.augmented.toml); empty when none of them is given.
 std::string augmented_model_path(const DiagnoseArgs& args);
 
-/// The augmented model file: `[model]` (the nominal model, what the controller
-/// uses), the user's other tables unchanged, and a `[sim]` table whose
-/// `[sim.truth]` is the model (with the nuisance refit: gain and G's time
-/// scale) plus the diagnosed effects in `[[sim.truth.effect]]`, dominant
-/// first, so pvcgeld's sim backend runs it.
+/// The augmented model file: `[model]` (what the controller uses: the nominal
+/// model with the diagnosis' refit of gain, G's time scale and f's shape) and
+/// `[[model.effect]]` (the diagnosed effects, dominant first, for the controller
+/// to compensate), the user's other tables unchanged, and a `[sim]` table whose
+/// `[sim.truth]` is the same model with the same effects in
+/// `[[sim.truth.effect]]`, so pvcgeld's sim backend runs it.
 std::string augmented_model_toml(const LoadedModel& model, const control::diagnosis::DiagnosisResult& result,
                                  const std::string& comment);
 

@@ -81,7 +81,6 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
     if (model.present()) {
       cfg.model = read_model(model);
       cfg.controller.io_delay_samples = model.integer("io_delay_samples", cfg.controller.io_delay_samples);
-      model.finish();
     }
 
     auto c = top.table("controller");
@@ -131,6 +130,11 @@ RigConfiguration parse_configuration(const toml::table& root, const std::string&
       cc.tuning = t;
     }
     c.finish();
+    // [[model.effect]]: what the model carries beyond f and G (sample-time dependent bounds).
+    if (model.present()) {
+      cc.effects = read_effect_tables(model, "effect", cc.sample_time_s);
+      model.finish();
+    }
 
     auto s = top.table("sim");
     cfg.sim = read_sim(s, cc.sample_time_s);

@@ -13,7 +13,7 @@ namespace pvcgel::control {
 /// A parsed configuration file. Tables that are absent keep their defaults.
 struct RigConfiguration {
   HammersteinModel model = paper_model(2);  ///< `[model]`: what the controller believes
-  ControllerConfig controller{};            ///< `[controller]`
+  ControllerConfig controller{};            ///< `[controller]`, plus `[model] io_delay_samples` and `[[model.effect]]`
   SimRigConfig sim{};                       ///< `[sim]`: the simulated truth
 };
 

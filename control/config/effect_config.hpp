@@ -1,8 +1,8 @@
 #pragma once
 /// @file
 /// Reading effects from a configuration file: one function for a list of
-/// effect tables, shared by `[[sim.truth.effect]]` (the simulated rig) and,
-/// later, the controller's own effect tables.
+/// effect tables, shared by `[[sim.truth.effect]]` (the simulated rig) and
+/// `[[model.effect]]` (what the controller compensates).
 ///
 /// Format: an array of tables, dominant effect first, each with `name` and the
 /// effect's physical parameters (units in the key names, see parameter_specs):

@@ -225,9 +225,44 @@ std::vector<SwitchCase> all_switches() {
   return v;
 }
 
-INSTANTIATE_TEST_SUITE_P(AllPairs, BumplessSwitch, ::testing::ValuesIn(all_switches()), [](const auto& param_info) {
-  return std::string(to_string(param_info.param.from)) + "_to_" + std::string(to_string(param_info.param.to));
-});
+std::string switch_case_name(const ::testing::TestParamInfo<SwitchCase>& info) {
+  return std::string(to_string(info.param.from)) + "_to_" + std::string(to_string(info.param.to));
+}
+
+INSTANTIATE_TEST_SUITE_P(AllPairs, BumplessSwitch, ::testing::ValuesIn(all_switches()), switch_case_name);
+
+class BumplessSwitchWithHysteresisCompensation : public ::testing::TestWithParam<SwitchCase> {};
+
+TEST_P(BumplessSwitchWithHysteresisCompensation, NoVoltageStepBeyondTheSlewLimit) {
+  // The model carries the rig's hysteresis ([[model.effect]]): the inverse modes run its
+  // exact inverse, and the switch re-aligns the PID through it.
+  const auto [from, to] = GetParam();
+  ControllerConfig cfg;
+  cfg.mode = from;
+  cfg.slew_limit_V_per_s = 5000.0;  // 5 V per sample
+  cfg.effects = {{EffectKind::hysteresis, {0.15, 50.0}}};
+  Controller ctl(paper_model(2), cfg);
+  auto rc = SimRigConfig{}.exactly(paper_model(2));
+  rc.added_effects = cfg.effects;
+  rc.noise_sigma_um = 0.05;
+  SimulatedRig rig(rc);
+  Loop loop(ctl, rig, *paper_reference("1Hz"));
+  double u_prev = 0.0, typical = 0.0;
+  for (int k = 0; k < 2500; ++k) {
+    const double u = loop.step().voltage_V;
+    if (k >= 1500) typical += std::abs(u - u_prev) / 1000.0;
+    u_prev = u;
+  }
+  ctl.set_mode(to);
+  const double jump = std::abs(loop.step().voltage_V - u_prev);
+  std::cout << to_string(from) << " -> " << to_string(to) << " with hysteresis compensation: |du| at switch " << jump
+            << " V, typical |du| " << typical << " V\n";
+  EXPECT_LE(jump, 5.0 + 1e-9);
+  EXPECT_LE(jump, 0.1 * typical);
+}
+
+INSTANTIATE_TEST_SUITE_P(AllPairs, BumplessSwitchWithHysteresisCompensation, ::testing::ValuesIn(all_switches()),
+                         switch_case_name);
 
 // ---------------------------------------------------------------------------------------
 // Disturbance observer in closed loop.

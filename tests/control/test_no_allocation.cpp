@@ -110,6 +110,45 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
   }
 }
 
+TEST(NoAllocation, ControllerCompensatingEachEffectAndMixturesDoesNotAllocate) {
+  // Every effect the controller compensates ([[model.effect]]), alone and in mixtures of two,
+  // in every mode (switches included), on a rig whose truth has the same effects.
+  const std::vector<Effect> effects{{EffectKind::hysteresis, {0.1, 30.0}}, {EffectKind::creep, {0.05, 10.0, 1.0}},
+                                    {EffectKind::dead_zone, {20.0, 30.0}}, {EffectKind::saturation, {100.0, 50.0}},
+                                    {EffectKind::delay, {2.5e-3}},         {EffectKind::slew_limit, {20000.0}},
+                                    {EffectKind::drift, {0.1, 0.01, 1.0}}};
+  std::vector<std::vector<Effect>> runs;
+  for (size_t i = 0; i < effects.size(); ++i) {
+    runs.push_back({effects[i]});
+    runs.push_back({effects[i], effects[(i + 1) % effects.size()]});
+  }
+  const auto ref = *paper_reference("multi");
+  for (const auto& mix : runs) {
+    ControllerConfig cfg;
+    cfg.effects = mix;
+    Controller ctl(paper_model(2), cfg);  // design time: may allocate
+    SimRigConfig rc = SimRigConfig{}.exactly(paper_model(2));
+    rc.added_effects = mix;
+    SimulatedRig rig(rc);
+    std::array<double, 8> window{};
+    const int len = ctl.preview_samples() + 1;
+    ASSERT_LE(len, static_cast<int>(window.size()));
+    double checksum = 0.0;
+    const long before = g_allocations.load();
+    ctl.reset_steady_state(ref(0.0));
+    rig.reset_steady_state(ctl.last_voltage_V());
+    for (long k = 0; k < 4000; ++k) {
+      if (k % 997 == 500) ctl.set_mode(kAllModes[static_cast<size_t>((k / 997 + 1) % 4)]);
+      for (int i = 0; i < len; ++i) window[static_cast<size_t>(i)] = ref(static_cast<double>(k + i) * 1e-3);
+      const auto out = ctl.step(std::span<const double>(window.data(), static_cast<size_t>(len)), rig.measure());
+      rig.apply(out.voltage_V);
+      checksum += out.voltage_V;
+    }
+    EXPECT_EQ(g_allocations.load() - before, 0) << to_string(mix.front().kind) << " + " << to_string(mix.back().kind);
+    EXPECT_TRUE(std::isfinite(checksum));
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(AllModes, NoAllocation, ::testing::ValuesIn(kAllModes),
                          [](const auto& param_info) { return std::string(to_string(param_info.param)); });
 

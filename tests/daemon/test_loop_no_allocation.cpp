@@ -82,3 +82,26 @@ TEST(LoopNoAllocation, CommandsAndReceivedSetpointsAllocateNothingInTheLoop) {
   EXPECT_EQ(g_allocations.load() - before, 0);
   EXPECT_EQ(loop.state(), daemon::LoopState::disabled);
 }
+
+TEST(LoopNoAllocation, CyclesWithCompensatedEffectsAllocateNothing) {
+  // A model file with [[model.effect]] (hysteresis and a delay) on a rig whose truth has them.
+  control::ControllerConfig cfg;
+  cfg.effects = {{control::EffectKind::hysteresis, {0.1, 40.0}}, {control::EffectKind::delay, {2.5e-3}}};
+  control::Controller controller(control::paper_model(2), cfg);
+  auto rig = control::SimRigConfig{}.exactly(control::paper_model(2));
+  rig.added_effects = cfg.effects;
+  hal::SimBackend sim(rig);
+  const auto trajectory = daemon::Trajectory::parse("paper-multi");
+  daemon::ControlLoop loop(sim, controller, trajectory, daemon::SafetyConfig{}, 1e-3,
+                           std::numeric_limits<double>::infinity());
+  auto ring = std::make_unique<daemon::RecordRing>();
+
+  const long before = g_allocations.load();
+  for (int k = 0; k < 10000; ++k) {
+    if (k % 2500 == 0) controller.set_mode(control::kAllModes[static_cast<size_t>((k / 2500 + 3) % 4)]);
+    const auto rec = loop.cycle(1.0f, 0);
+    if (!ring->push(rec)) (void)ring->pop();
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
+  EXPECT_EQ(loop.fault(), daemon::FaultReason::none);
+}

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "control/config/config_parser.hpp"
+#include "control/config/effect_config.hpp"
 #include "control/diagnosis/generator.hpp"
 #include "control/simulated_rig.hpp"
 #include "daemon/daemon_config.hpp"
@@ -81,14 +82,26 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   std::getline(pf, header);
   EXPECT_EQ(header, "t_s,y_um_baseline,y_um_fitted");
 
-  // The augmented model: a daemon configuration whose sim rig reproduces the fitted prediction.
+  // The augmented model: [model] + [[model.effect]] for the controller, and a sim rig that reproduces the fitted prediction.
   ASSERT_EQ(o.augmented_model_path, (dir / "predaugmented_model.toml").string());
-  const auto cfg = daemon::load_daemon_config(o.augmented_model_path);
-  ASSERT_EQ(cfg.rig.sim.added_effects.size(), 1u);
-  ASSERT_EQ(cfg.rig.sim.added_effects[0].kind, EffectKind::creep);
+  const auto root = toml::parse_file(o.augmented_model_path);
+  const auto sim_cfg = control::parse_simulated_rig(root, o.augmented_model_path);
+  ASSERT_EQ(sim_cfg.added_effects.size(), 1u);
+  ASSERT_EQ(sim_cfg.added_effects[0].kind, EffectKind::creep);
   for (size_t i = 0; i < 3; ++i)
-    EXPECT_NEAR(cfg.rig.sim.added_effects[0].p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
-  auto sim = cfg.rig.sim;
+    EXPECT_NEAR(sim_cfg.added_effects[0].p[i], o.result.effect.p[i], 1e-7 * std::abs(o.result.effect.p[i]));
+  // The controller's [model] is the refitted model (the effects hold only with it), its effects the same as the sim's,
+  // read by the one effect-table parser.
+  const auto controller_model = control::parse_model(root, o.augmented_model_path);
+  control::TableReader model_table(root["model"].as_table(), "model");
+  const auto controller_effects = control::read_effect_tables(model_table, "effect", 1e-3);
+  ASSERT_EQ(controller_effects.size(), 1u);
+  EXPECT_EQ(controller_effects[0].kind, EffectKind::creep);
+  EXPECT_EQ(controller_effects[0].p, sim_cfg.added_effects[0].p);
+  EXPECT_EQ(controller_model.f.coefficients(), sim_cfg.truth.f.coefficients());
+  EXPECT_EQ(controller_model.G.den(), sim_cfg.truth.G.den());
+  EXPECT_EQ(model_table.integer("io_delay_samples", -1), sim_cfg.io_delay_samples);
+  auto sim = sim_cfg;
   sim.noise_sigma_um = sim.quantization_um = 0.0;
   control::SimulatedRig rig(sim);
   const auto& s = c.recordings[0];
@@ -97,8 +110,8 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   auto poly = truth.f.coefficients();
   for (double& c : poly) c *= o.result.nominal_refit.gain;
   truth.f = control::OddPolynomial(poly);
-  ASSERT_EQ(cfg.rig.sim.io_delay_samples, std::lround(o.result.alignment.used_samples));
-  AugmentedPlant plant(truth, cfg.rig.sim.io_delay_samples, s.sample_time_s, o.result.effect);
+  ASSERT_EQ(sim_cfg.io_delay_samples, std::lround(o.result.alignment.used_samples));
+  AugmentedPlant plant(truth, sim_cfg.io_delay_samples, s.sample_time_s, o.result.effect);
   const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
   const double offset_um = o.result.alignment.offset_um[0];
   rig.reset_steady_state(s.u_V[0]);

@@ -128,6 +128,23 @@ TEST(ConfigParser, ErrorsNameTheDottedKey) {
   expect_key("[model]\npoly = [0.127]\nG_num = [-1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n", "model.G");  // RHP zero
 }
 
+TEST(ConfigParser, ModelEffectsReachTheController) {
+  const std::string model = "[model]\npoly = [0.1270, 1.3057e-5]\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n";
+  const auto cfg = parse(model + "[[model.effect]]\nname = \"hysteresis\"\nalpha = 0.1\nthreshold_scale_V = 30.0\n"
+                                 "[[model.effect]]\nname = \"creep\"\nfraction = 0.05\ntime_constant_s = 10.0\n");
+  ASSERT_EQ(cfg.controller.effects.size(), 2u);
+  EXPECT_EQ(cfg.controller.effects[0].kind, EffectKind::hysteresis);
+  EXPECT_DOUBLE_EQ(cfg.controller.effects[0].p[1], 30.0);
+  EXPECT_EQ(cfg.controller.effects[1].kind, EffectKind::creep);
+  EXPECT_DOUBLE_EQ(cfg.controller.effects[1].p[2], 0.0);  // spread_decades' default
+  // Bad tables and refused effects name the table.
+  expect_key(model + "[[model.effect]]\nname = \"hysteresis\"\nalpha = 0.1\n", "model.effect[0].threshold_scale_V");
+  expect_key(model + "[[model.effect]]\nname = \"backlash\"\n", "model.effect[0].name");
+  expect_key(model + "[[model.effect]]\nname = \"asymmetric_dynamics\"\nrelaxation_slowdown = 0.3\n", "model.effect[0]");
+  expect_key(model + "[[model.effect]]\nname = \"hysteresis\"\nalpha = 0.95\nthreshold_scale_V = 30.0\n",
+             "model.effect[0].alpha");
+}
+
 TEST(ConfigParser, OutOfRangeIntegersAreRejected) {
   expect_key("[controller.dob]\nq_order = 4294967297\n", "controller.dob.q_order");
   expect_key("[model]\npoly = [0.127, 1.3057e-5]\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n"
