@@ -63,7 +63,8 @@ class HysteresisOperator final {
 ///    the plant delays it, and their output is subtracted from measurement and
 ///    reference (the preview's samples predicted that far ahead). The loop then
 ///    sees G alone; the feedforward, fed r - creep, inverts G + creep in effect
-///    (a feedback around G^-1 whose loop gain is at most |fraction| < 1).
+///    (a feedback around G^-1 with loop gain fraction G(0) / (G(s) (tau s + 1)):
+///    the fraction at DC, falling beyond the creep's corner for the gel's G).
 ///    Folding creep into G instead was tried: the sampled G + creep has a zero
 ///    within 1e-4 of its creep pole near z = 1, which the discrete inverse's
 ///    design check cannot place reliably (it saw z = 1.0004 for 5% at 10 s);
@@ -87,7 +88,7 @@ class EffectCompensator final {
   ///         multiply voltage steps by 10 or more), a dead zone plus catch-up at or
   ///         above voltage_max_V, a saturation whose inverse gain at the stroke
   ///         of operating_point_um exceeds 4 (the stroke lies deep beyond the knee).
-  /// @param delay_samples  the sampled model's I/O delay (creep's input is delayed as much, plus a delay effect)
+  /// @param io_delay_samples  the sampled model's I/O delay (creep's input is delayed as much, plus a delay effect)
   /// @param operating_point_um  a displacement the loop must work at (the saturation's safety check)
   EffectCompensator(const HammersteinModel& model, std::span<const Effect> effects, double sample_time_s,
                     double voltage_min_V, double voltage_max_V, int io_delay_samples, double operating_point_um);
