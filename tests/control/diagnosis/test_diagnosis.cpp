@@ -118,14 +118,14 @@ TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
   } catch (const std::invalid_argument& e) {
     EXPECT_STREQ(e.what(), "sample 7: non-finite t_s, u_V or y_um");
   }
-  auto shortest = recording({}, 0.05, 1, 5.0);
+  auto shortest = recording({}, 0.05, 1, 1.5);
   try {
     check_series(shortest, model);
     FAIL();
   } catch (const std::invalid_argument& e) {
     EXPECT_STREQ(e.what(),
-                 "recording lasts 5 s, shorter than 3 time constants of G's slowest pole (5.68 s): the output-error "
-                 "simulation cannot be judged");
+                 "recording lasts 1.5 s, shorter than one time constant of G's slowest pole (1.89 s): the start state "
+                 "cannot be told from the response");
   }
 }
 
