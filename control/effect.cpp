@@ -128,7 +128,11 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
               {"onset_s", 0.0, dur, false, {0.0, 0.25 * dur, 0.5 * dur}}};
     }
     case EffectKind::bias_dependent_dynamics:
-      return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}}, {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}}};
+      // beta per reference displacement: the largest recorded one, so beta means the same for a nanometre
+      // piezo and a millimetre stroke (a fixed f(500 V) reference left it powerless off the PVC gel's scale).
+      return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}},
+              {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}},
+              {"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true}};
   }
   return {};
 }
@@ -165,6 +169,7 @@ void validate(const Effect& e, double Ts, const std::string& key) {
   const auto big = parameter_specs(e.kind, DataScale::unbounded(Ts)), small = parameter_specs(e.kind, DataScale::tiny(Ts));
   for (size_t i = 0; i < big.size(); ++i) {
     const double lower = std::min(big[i].lower, small[i].lower), upper = std::max(big[i].upper, small[i].upper);
+    if (e.p[i] == big[i].default_value) continue;  // a default is always valid (e.g. reference_um = 0: the old reference)
     if (!std::isfinite(e.p[i]) || e.p[i] < lower || e.p[i] > upper)
       throw ConfigError(key + "." + big[i].name, "must be in [" + std::to_string(lower) + ", " + std::to_string(upper) +
                                                      "], got " + std::to_string(e.p[i]));
@@ -228,7 +233,8 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   dc_gain_ = model.G.dc_gain();
   const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
   if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts / op_tau) : 1.0;
-  y_ref_ = std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
+  const double reference_um = time_scaling_ == EffectKind::bias_dependent_dynamics ? p(EffectKind::bias_dependent_dynamics)[2] : 0.0;
+  y_ref_ = reference_um > 0.0 ? reference_um : std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
   x_ = Vector::Zero(ss.order());
   reset_steady_state(0.0);
 }

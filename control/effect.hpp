@@ -57,6 +57,9 @@ struct ParameterSpec {
   /// Value when a file omits the key (NaN: the key is required). Parameters
   /// added after the format was first written have one, so old files still load.
   double default_value = std::numeric_limits<double>::quiet_NaN();
+  /// Set from the recording's scale (lower == upper), not fitted: a reference that makes the other
+  /// parameters dimensionless for any actuator.
+  bool fixed = false;
 };
 
 /// The size of what was recorded: parameter bounds and starting points scale
@@ -162,8 +165,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    d the direct fraction (0: a full second-order low-pass; near 1: a mode with a small participation,
 ///    a pole pair with a zero pair just above it);
 ///  - drift: offset + rate max(t - onset, 0), independent of the input;
-///  - bias_dependent_dynamics: G runs (1 + beta y / y_ref) times slower,
-///    y_ref = G(0) f(500 V).
+///  - bias_dependent_dynamics: G runs (1 + beta y_op / y_ref) times slower, y_op the displacement
+///    low-passed over the operating-point time constant and y_ref = reference_um (diagnose sets it to the
+///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V)).
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:

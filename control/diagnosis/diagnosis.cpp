@@ -52,8 +52,12 @@ struct FitSpace {
   FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
            const std::vector<Series>* data = nullptr);
   [[nodiscard]] double scale(size_t i) const { return (specs[i].upper - specs[i].lower) / 100.0; }
-  [[nodiscard]] double to_z(size_t i, double p) const { return specs[i].log_scale ? std::log(p) : p / scale(i); }
+  [[nodiscard]] double to_z(size_t i, double p) const {
+    if (specs[i].fixed) return 0.0;
+    return specs[i].log_scale ? std::log(p) : p / scale(i);
+  }
   [[nodiscard]] double to_p(size_t i, double z) const {
+    if (specs[i].fixed) return specs[i].lower;
     const double p = specs[i].log_scale ? std::exp(z) : z * scale(i);
     return std::clamp(p, specs[i].lower, specs[i].upper);
   }
@@ -310,6 +314,10 @@ Eigen::VectorXd levenberg_marquardt(Problem& problem, const FitSpace& c, Eigen::
   for (int iter = 0; iter < 25; ++iter) {
     Eigen::MatrixXd J(r.size(), n);
     for (Eigen::Index i = 0; i < n; ++i) {
+      if (c.specs[static_cast<size_t>(i)].fixed) {  // set from the data, not fitted
+        J.col(i).setZero();
+        continue;
+      }
       Eigen::VectorXd zh = z;
       const double h = 1e-3;
       zh(i) += h;
@@ -450,9 +458,11 @@ void check_series(const Series& s, const HammersteinModel& model) {
   double slowest = 0.0;
   for (const auto& p : model.G.poles()) slowest = std::max(slowest, -1.0 / p.real());
   const double dur = static_cast<double>(n - 1) * Ts;
-  if (dur < 3.0 * slowest)
-    throw std::invalid_argument("recording lasts " + fmt("%.3g", dur) + " s, shorter than 3 time constants of G's slowest pole (" +
-                                fmt("%.3g", 3.0 * slowest) + " s): the output-error simulation cannot be judged");
+  // The start state is fitted (G's free-response modes), so a recording need not outlast the start-up
+  // transient several times; shorter than one time constant, the start cannot be told from the response.
+  if (dur < slowest)
+    throw std::invalid_argument("recording lasts " + fmt("%.3g", dur) + " s, shorter than one time constant of G's slowest pole (" +
+                                fmt("%.3g", slowest) + " s): the start state cannot be told from the response");
 }
 
 std::vector<std::vector<double>> simulate(const HammersteinModel& model, const Effect& effect,
@@ -592,6 +602,14 @@ double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {
   return r.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(r.size(), 1));
 }
 
+/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
+Nominal refit_nominal(Problem& p, const DiagnosisOptions& o) {
+  FitSpace space({}, DataScale{}, true, o);  // no effect: the data scale is not used
+  double cost = 0.0;
+  const auto z = levenberg_marquardt(p, space, space.z_of({}, Nominal{}), cost);
+  return space.g_scale(z);
+}
+
 /// Alignment: the rest voltage each recording starts from (u[0] or the one its
 /// first samples imply, whichever the nominal model fits better), then the I/O
 /// delay (whole samples, refined sub-sample by a parabola through the fit
@@ -615,12 +633,15 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
     chosen.push_back(ea <= eb ? data[r].u_V.front() : NAN);
   }
   p.set_initial(chosen);
-  // Delay: search 0..max (an undeclared delay) or 0..declared + 2 (to check the file).
+  // Delay: search 0..max (an undeclared delay) or 0..declared + 2 (to check the file), jointly with the
+  // nuisance refit of the nominal model at every delay: a G a few percent too slow or too fast looks
+  // like a sample of delay, and a delay estimated without the refit leaves that sample to be blamed on
+  // a `delay` effect later.
   const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
   std::vector<double> mse;
   for (int d = 0; d <= max_d; ++d) {
     p.set_delay(d);
-    mse.push_back(fit_mse(p, {}, 1.0));
+    mse.push_back(fit_mse(p, {}, refit_nominal(p, o)));
   }
   const auto best = static_cast<int>(std::min_element(mse.begin(), mse.end()) - mse.begin());
   a.io_delay_samples = best;
@@ -696,14 +717,6 @@ void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma,
     }
     if (is_open) close(s.u_V.size());
   }
-}
-
-/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
-Nominal refit_nominal(Problem& p, const DataScale& scale, const DiagnosisOptions& o) {
-  FitSpace space({}, scale, true, o);
-  double cost = 0.0;
-  const auto z = levenberg_marquardt(p, space, space.z_of({}, Nominal{}), cost);
-  return space.g_scale(z);
 }
 
 /// Coarse grid (the evidence) for every candidate, then joint least squares
@@ -945,7 +958,11 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
 
 }  // namespace
 
-DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
+namespace {
+
+/// Bad input stops before any analysis: no recordings, an unstable G, a bad series, an f that turns over
+/// inside the recorded voltages.
+void check_inputs(const HammersteinModel& model, const std::vector<Series>& data) {
   if (data.empty()) throw std::invalid_argument("no recordings");
   if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
   double u_max = 0.0;
@@ -956,63 +973,94 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   if (const auto turn = model.f.first_turnover(std::max(u_max, 1e-9)))
     throw ConfigError("model.poly", "f is not monotone: f'(x) reaches 0 at x = " + fmt("%.4g", *turn) +
                                         " V, inside the recorded voltage range (|u| up to " + fmt("%.4g", u_max) + " V)");
+}
 
-  DiagnosisResult res;
-  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-  Problem problem(model, data, res.held_out, o.gain_tolerance);
-  // 1. Alignment (nuisance): start state, I/O delay, offset; the nominal model with it is the baseline.
+/// 1. Alignment (nuisance): start state, I/O delay, offset. The baseline is the model as the file states it
+/// (with the estimated delay when the file is silent); `aligned` adds the sensor offset and start state,
+/// which are not the model's fault. Returns the scale of the data (for the candidates' ranges).
+DataScale align_and_baseline(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                             const DiagnosisOptions& o) {
   res.alignment = estimate_alignment(problem, data, o);
-  // The baseline is the model as the file states it (with the estimated delay when the file is silent);
-  // `aligned` adds the sensor offset and start state, which are not the model's fault.
   const auto base = problem.predict({}, 1.0, false);
   res.y_baseline_um = problem.raw({}, 1.0, true);
   res.baseline = errors_of(data, res.y_baseline_um, res.held_out);
   res.aligned = errors_of(data, base.y, res.held_out);
   res.alignment.offset_um = base.offset_um;
-  // 2. Nuisance-only refit of the nominal model: gain and G's time scale within tolerance.
-  const DataScale scale = data_scale(data, base.y);
-  const Nominal k = refit_nominal(problem, scale, o);
-  const auto refit = problem.predict({}, k, true);
-  res.nominal_refit = {refit.gain, k.time_scale, k.shape, errors_of(data, refit.y, res.held_out)};
+  res.fitted = res.baseline;
+  res.y_fitted_um = res.y_baseline_um;
+  return data_scale(data, base.y);
+}
+
+/// Sensor noise: the median over recordings of the noise estimated from each one's residual.
+double noise_sigma(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat) {
   std::vector<double> sigmas;
   for (size_t r = 0; r < data.size(); ++r) {
     std::vector<double> e(data[r].y_um.size());
-    for (size_t i = 0; i < e.size(); ++i) e[i] = data[r].y_um[i] - refit.y[r][i];
+    for (size_t i = 0; i < e.size(); ++i) e[i] = data[r].y_um[i] - yhat[r][i];
     sigmas.push_back(estimate_noise_sigma(e));
   }
   std::sort(sigmas.begin(), sigmas.end());
-  const double sigma = std::max(sigmas[sigmas.size() / 2], 1e-12);
-  res.noise_sigma_um = sigma;
-  // 3. The none test, and where the nominal model disagrees.
-  res.none_test = none_test(data, refit.y, sigma, o);
-  locate(res, data, sigma, std::sqrt(res.none_test.window_threshold), o);
-  res.fitted = res.baseline;
-  res.y_fitted_um = res.y_baseline_um;
+  return std::max(sigmas[sigmas.size() / 2], 1e-12);
+}
+
+/// 2. Nuisance-only refit of the nominal model (gain, G's time scale, f's shape within tolerance), the noise
+/// estimated from its residual, 3. the none test on it and the mismatch windows. Returns its prediction.
+Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DiagnosisOptions& o,
+                          Nominal& k) {
+  k = refit_nominal(problem, o);
+  auto refit = problem.predict({}, k, true);
+  res.nominal_refit = {refit.gain, k.time_scale, k.shape, errors_of(data, refit.y, res.held_out)};
+  res.noise_sigma_um = noise_sigma(data, refit.y);
+  res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
+  locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
+  return refit;
+}
+
+/// `none` when the level test passes and the residual is white, or its excess is under a tenth of the
+/// noise variance (a correlated residual that small is not a material effect). Fills the verdict if so.
+bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions& o) {
+  const double sigma = res.noise_sigma_um;
   const double refit_ms = res.nominal_refit.errors.rmse_um * res.nominal_refit.errors.rmse_um;
-  // A correlated residual below a tenth of the noise variance is not a material effect.
-  if (res.none_test.level_ok && (res.none_test.white || refit_ms <= 1.1 * sigma * sigma)) {
-    res.verdict = "none";
-    res.fitted = res.nominal_refit.errors;
-    res.y_fitted_um = refit.y;
-    res.explanation = std::string(physical_meaning(EffectKind::none)) + ": residual RMS " +
-                      fmt("%.3g", res.nominal_refit.errors.rmse_um) + " um after the nuisance-only refit against an "
-                      "estimated sensor noise of " + fmt("%.3g", sigma) + " um; no 1 s window exceeds its threshold (" +
-                      fmt("%.3g", res.none_test.window_threshold) + " x the noise variance at a " +
-                      fmt("%.2g", 100.0 * o.false_alarm_rate) + "% false-alarm rate, corrected for " +
-                      std::to_string(res.none_test.windows) + " windows)" +
-                      (res.none_test.white ? " and the residual is white" : "");
-    res.simulations = problem.simulations();
-    return res;
-  }
-  // 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict.
-  fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm());
+  if (!res.none_test.level_ok || !(res.none_test.white || refit_ms <= 1.1 * sigma * sigma)) return false;
+  res.verdict = "none";
+  res.fitted = res.nominal_refit.errors;
+  res.y_fitted_um = std::move(refit.y);
+  res.explanation = std::string(physical_meaning(EffectKind::none)) + ": residual RMS " +
+                    fmt("%.3g", res.nominal_refit.errors.rmse_um) + " um after the nuisance-only refit against an "
+                    "estimated sensor noise of " + fmt("%.3g", sigma) + " um; no 1 s window exceeds its threshold (" +
+                    fmt("%.3g", res.none_test.window_threshold) + " x the noise variance at a " +
+                    fmt("%.2g", 100.0 * o.false_alarm_rate) + "% false-alarm rate, corrected for " +
+                    std::to_string(res.none_test.windows) + " windows)" +
+                    (res.none_test.white ? " and the residual is white" : "");
+  return true;
+}
+
+/// The text of every candidate: what it means physically, its fitted parameters and what it does to the held-out error.
+void explain_candidates(DiagnosisResult& res) {
   for (auto& c : res.candidates)
     c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
                     (c.fitted ? " (G time scale " + fmt("%.3g", c.time_scale) + ", gain " + fmt("%.3g", c.gain) +
                                     "); validation RMSE " + fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) +
                                     " -> " + fmt("%.3g", c.errors.rmse_validation_um) + " um"
                               : " (coarse grid only: not among the leading candidates)");
-  decide(res, problem, data, scale, o);
+}
+
+}  // namespace
+
+DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
+  check_inputs(model, data);
+  DiagnosisResult res;
+  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+  Problem problem(model, data, res.held_out, o.gain_tolerance);
+  const DataScale scale = align_and_baseline(res, problem, data, o);
+  Nominal k;
+  auto refit = refit_and_test(res, problem, data, o, k);
+  if (!decide_none(res, refit, o)) {
+    // 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict.
+    fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm());
+    explain_candidates(res);
+    decide(res, problem, data, scale, o);
+  }
   res.simulations = problem.simulations();
   return res;
 }

@@ -176,9 +176,9 @@ TEST(DiagnoseCommand, BadInputNamesFileLineAndReason) {
   EXPECT_EQ(error_of(kModelN3, "t_s,u_V,y_um\n0,1,1\n0.001,1,1\n0.003,1,1\n0.004,1,1\n"),
             "rec.csv:3: non-uniform or non-monotone time (step 0.001000 s, expected 0.001333 s)");
   EXPECT_EQ(error_of(kModelN3, "t_s,u_V,y_um\n0,1,1\n0.001,1,1\n0.0005,1,1\n"), "rec.csv:3: non-uniform or non-monotone time (step 0.001000 s, expected 0.000250 s)");
-  EXPECT_EQ(error_of(kModelN3, uniform_recording(2000)),
-            "rec.csv: recording lasts 2 s, shorter than 3 time constants of G's slowest pole (5.68 s): the output-error "
-            "simulation cannot be judged");
+  EXPECT_EQ(error_of(kModelN3, uniform_recording(1000)),
+            "rec.csv: recording lasts 0.999 s, shorter than one time constant of G's slowest pole (1.89 s): the start "
+            "state cannot be told from the response");
   // A NaN row inside a recording breaks the uniform time base once skipped.
   std::string nan_inside = "t_s,u_V,y_um\n0,1,1\n0.001,nan,1\n0.002,1,1\n0.003,1,1\n";
   EXPECT_EQ(error_of(kModelN3, nan_inside),
