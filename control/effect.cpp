@@ -6,15 +6,12 @@
 #include <numbers>
 
 #include "control/config_error.hpp"
+#include "control/text_format.hpp"
 #include "control/state_space.hpp"
 
 namespace pvcgel::control {
 
 namespace {
-
-constexpr std::array<std::string_view, 11> kNames{"none",  "hysteresis", "creep",     "dead_zone",
-                                                  "saturation", "delay", "asymmetric_dynamics", "slew_limit",
-                                                  "resonance",  "drift", "bias_dependent_dynamics"};
 
 std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b) {
   if (a.size() < b.size()) std::swap(a, b);
@@ -68,14 +65,6 @@ TransferFunction linear_block(const TransferFunction& G, std::span<const Effect>
     if (e.kind == EffectKind::resonance) has_mode = true, mode = e.p;
   }
   return linear_block(G, has_creep, creep, has_mode, mode);
-}
-
-std::string_view to_string(EffectKind kind) noexcept { return kNames[static_cast<size_t>(kind)]; }
-
-std::optional<EffectKind> parse_effect_kind(std::string_view name) noexcept {
-  for (size_t i = 0; i < kNames.size(); ++i)
-    if (kNames[i] == name) return static_cast<EffectKind>(i);
-  return std::nullopt;
 }
 
 std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) {
@@ -171,14 +160,13 @@ void validate(const Effect& e, double Ts, const std::string& key) {
     const double lower = std::min(big[i].lower, small[i].lower), upper = std::max(big[i].upper, small[i].upper);
     if (e.p[i] == big[i].default_value) continue;  // a default is always valid (e.g. reference_um = 0: the old reference)
     if (!std::isfinite(e.p[i]) || e.p[i] < lower || e.p[i] > upper)
-      throw ConfigError(key + "." + big[i].name, "must be in [" + std::to_string(lower) + ", " + std::to_string(upper) +
-                                                     "], got " + std::to_string(e.p[i]));
+      throw ConfigError(key + "." + big[i].name, format("must be in [%g, %g], got %g", lower, upper, e.p[i]));
   }
 }
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {
   int count = 0, time_scaling = 0;
-  std::array<bool, kNames.size()> seen{};
+  std::array<bool, kEffectKindNames.size()> seen{};
   for (const auto& e : effects) {
     if (e.kind == EffectKind::none) continue;
     ++count;

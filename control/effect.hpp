@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <array>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -17,12 +18,13 @@
 #include <utility>
 #include <vector>
 
+#include "control/enum_table.hpp"
 #include "control/hammerstein_model.hpp"
 
 namespace pvcgel::control {
 
 /// What the nominal model may be missing.
-enum class EffectKind {
+enum class EffectKind : std::uint8_t {
   none,
   hysteresis,
   creep,
@@ -43,9 +45,15 @@ inline constexpr std::array<EffectKind, 10> kCandidateEffects{
     EffectKind::drift,      EffectKind::bias_dependent_dynamics};
 
 /// Name used in reports and files ("hysteresis", ..., "none").
-std::string_view to_string(EffectKind kind) noexcept;
+inline constexpr auto kEffectKindNames = enum_table<EffectKind::none, EffectKind::bias_dependent_dynamics>(
+    {"none", "hysteresis", "creep", "dead_zone", "saturation", "delay", "asymmetric_dynamics", "slew_limit", "resonance",
+     "drift", "bias_dependent_dynamics"});
+constexpr const auto& names_of(EffectKind) noexcept { return kEffectKindNames; }
+constexpr std::string_view to_string(EffectKind kind) noexcept { return kEffectKindNames.to_string(kind); }
 /// Inverse of to_string.
-std::optional<EffectKind> parse_effect_kind(std::string_view name) noexcept;
+constexpr std::optional<EffectKind> parse_effect_kind(std::string_view name) noexcept {
+  return kEffectKindNames.parse(name);
+}
 
 /// One physical parameter of an effect.
 struct ParameterSpec {
@@ -194,7 +202,7 @@ class AugmentedPlant final {
 
  private:
   static constexpr int kMaxOrder = 9;
-  static constexpr size_t kKinds = 11;
+  static constexpr size_t kKinds = kEffectKindNames.size();
   static constexpr int kPlays = kHysteresisPlays;
   static constexpr int kDelayLine = kDelayLineSamples;
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;

@@ -1,4 +1,5 @@
 #include "control/effect_compensator.hpp"
+#include "control/text_format.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -18,11 +19,6 @@ constexpr double kMaxSaturationInverseGain = 4.0;
 /// share of the softness are read as this far: its inverse is unbounded there.
 constexpr double kSaturationCeilingShare = 0.95;
 
-std::string format(const char* fmt, double a, double b, double c = 0.0) {
-  char buf[400];
-  std::snprintf(buf, sizeof buf, fmt, a, b, c);
-  return buf;
-}
 }  // namespace
 
 HysteresisOperator::HysteresisOperator(double alpha, double R) noexcept : a0_(1.0 - alpha), a_(alpha / kN) {

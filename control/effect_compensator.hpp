@@ -141,8 +141,12 @@ class EffectCompensator final {
   [[nodiscard]] double creep_ahead(int ahead) const noexcept;
   void refuse_unsafe(const HammersteinModel& model, double voltage_max_V, double operating_point_um) const;
 
-  static constexpr size_t kKinds = 11;
-  std::array<int, kKinds> index_{-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1};
+  static constexpr size_t kKinds = kEffectKindNames.size();
+  std::array<int, kKinds> index_ = [] {
+    std::array<int, kKinds> a{};
+    a.fill(-1);  // -1: the kind is not compensated
+    return a;
+  }();
   std::array<std::array<double, kMaxEffectParams>, kKinds> p_{};
   std::array<Effect, kKinds> effects_{};
   int count_ = 0;

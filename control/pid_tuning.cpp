@@ -1,4 +1,5 @@
 #include "control/pid_tuning.hpp"
+#include "control/text_format.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -64,8 +65,7 @@ LoopMargins loop_margins(const DiscreteTransferFunction& c, const DiscreteTransf
 TuningResult tune_pid(const DiscreteTransferFunction& plant, double Ts, const TuningTarget& t) {
   const double wc = t.crossover_rad_s;
   if (!(wc > 0.0 && wc < std::numbers::pi / Ts))
-    throw ConfigError("controller.tuning.crossover_rad_s", "must be in (0, Nyquist = " +
-                                                               std::to_string(std::numbers::pi / Ts) + ") rad/s");
+    throw ConfigError("controller.tuning.crossover_rad_s", format("must be in (0, Nyquist = %g) rad/s", std::numbers::pi / Ts));
   if (!(t.phase_margin_deg > 0.0 && t.phase_margin_deg < 90.0))
     throw ConfigError("controller.tuning.phase_margin_deg", "must be in (0, 90) degrees");
   const std::complex<double> P = plant.frequency_response(wc, Ts);

@@ -8,15 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "control/text_format.hpp"
+
 namespace pvcgel::tools {
 
-/// printf-style formatting into a string (at most 511 characters).
-template <typename... Args>
-std::string format(const char* printf_format, Args... values) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, printf_format, values...);
-  return buf;
-}
+using control::format;
 
 /// `printf_format` applied, or `null` (JSON's word for it) when the value is not finite.
 std::string number_or_null(double value, const char* printf_format = "%.6g");

@@ -445,7 +445,7 @@ GeneratedCase generate_case(const HammersteinModel& model, EffectKind kind, std:
 
 std::vector<std::pair<EffectKind, std::uint64_t>> blind_suite_plan(int cases, std::uint64_t seed) {
   std::vector<EffectKind> labels;
-  for (int i = 0; i < cases; ++i) labels.push_back(static_cast<EffectKind>(i % 11));
+  for (int i = 0; i < cases; ++i) labels.push_back(static_cast<EffectKind>(i % static_cast<int>(kEffectKindNames.size())));
   std::mt19937_64 rng(seed);
   std::shuffle(labels.begin(), labels.end(), rng);
   std::vector<std::pair<EffectKind, std::uint64_t>> plan;

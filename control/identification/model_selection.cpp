@@ -1,4 +1,5 @@
 #include "control/identification/model_selection.hpp"
+#include "control/text_format.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -48,7 +49,7 @@ ModelChoice choose_by_validation(const NonlinearityFit& fit, const std::vector<s
   for (size_t i = 0; i < choice.mean_nrmse.size(); ++i)
     os << (i ? ", " : "") << "n = " << i + 1 << ": "
        << (std::isnan(choice.mean_nrmse[i]) ? std::string("excluded, f turns over below the highest bias")
-                                             : std::to_string(choice.mean_nrmse[i]));
+                                             : format("%.4g", choice.mean_nrmse[i]));
   os << ")";
   if (const auto turn = turnover(fit.candidate(choice.terms), o.amplifier_max_V)) {
     choice.voltage_max_V = std::floor((1.0 - o.turnover_margin) * *turn);

@@ -1,4 +1,5 @@
 #include "control/identification/nonlinearity_fit.hpp"
+#include "control/text_format.hpp"
 
 #include <Eigen/Dense>
 #include <cmath>
@@ -61,8 +62,7 @@ NonlinearityFit fit_nonlinearity(const DescribingFunctionData& d, const Nonlinea
     }
   if (best_n == 0)
     throw std::invalid_argument("no polynomial degree 1.." + std::to_string(max_n) +
-                                " gives an f that is strictly increasing on [0, " + std::to_string(o.voltage_max_V) +
-                                "] V");
+                                format(" gives an f that is strictly increasing on [0, %g] V", o.voltage_max_V));
   for (const auto& c : fit.candidates)
     if (c.monotone() && c.residual_norm <= (1.0 + o.tolerance) * best) {
       fit.chosen_terms = c.terms;
