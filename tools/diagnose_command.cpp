@@ -435,13 +435,10 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
   if (!model_path.empty()) {
     const std::string text = augmented_model_toml(lm, r, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
-    // The file must be what the sim backend accepts (a controller is not needed to diagnose): parse it back first.
-    try {
-      (void)control::parse_simulated_rig(toml::parse(text), model_path);
-    } catch (const std::exception& e) {
-      throw std::runtime_error("the augmented model " + model_path + " was not written (the JSON and report were): " + e.what());
-    }
-    write_text_file(model_path, text);
+    // The file must be what the sim backend accepts (a controller is not needed to diagnose).
+    write_checked_toml(
+        model_path, text, [](const toml::table& t, const std::string& p) { (void)control::parse_simulated_rig(t, p); },
+        "the augmented model " + model_path + " was not written (the JSON and report were)");
     out.augmented_model_path = model_path;
   }
   return out;

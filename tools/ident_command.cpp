@@ -571,13 +571,10 @@ void write_model(const IdentArgs& a, const IdentificationResult& r, const Identi
     text += format("\n# f turns over above this: the inverse controller needs f strictly increasing up to the limit\n"
                    "[controller]\nvoltage_max_V = %.0f\n",
                    *choice.voltage_max_V);
-  // The file must be what the daemon accepts: parse it back (model and controller) before writing.
-  try {
-    (void)control::parse_configuration(toml::parse(text), a.out);
-  } catch (const std::exception& e) {
-    throw std::runtime_error(std::string("internal: the model file does not parse back: ") + e.what());
-  }
-  write_text_file(a.out, text);
+  // The file must be what the daemon accepts (model and controller).
+  write_checked_toml(
+      a.out, text, [](const toml::table& t, const std::string& p) { (void)control::parse_configuration(t, p); },
+      "internal: the model file does not parse back");
   out << "wrote " << a.out << " (n = " << choice.terms << ")\n";
 }
 

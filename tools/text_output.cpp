@@ -25,6 +25,17 @@ void write_text_file(const std::filesystem::path& path, const std::string& text)
   if (!f.flush()) throw std::runtime_error("write failed: " + path.string());
 }
 
+void write_checked_toml(const std::filesystem::path& path, const std::string& text,
+                        const std::function<void(const toml::table&, const std::string& path)>& check,
+                        const std::string& refusal) {
+  try {
+    check(toml::parse(text), path.string());
+  } catch (const std::exception& e) {
+    throw std::runtime_error(refusal + ": " + e.what());
+  }
+  write_text_file(path, text);
+}
+
 double process_cpu_s() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
 }  // namespace pvcgel::tools
