@@ -33,6 +33,11 @@ constexpr const char* kControlDisabled =
 
 /// Channel offsets within a rig's block of ids (rig k: 1 + 8 k + offset).
 enum Topic : std::uint32_t { telemetry, telemetry_decimated, telemetry_batch, status, command_reply, kTopics };
+/// Channel ids: rig i's topic k is 1 + 8 i + k (0 is not a valid channel id; 8 leaves room for new topics).
+constexpr std::uint32_t kChannelsPerRig = 8;
+constexpr std::uint32_t channel_id(std::uint32_t rig_index, std::uint32_t topic) noexcept {
+  return 1 + kChannelsPerRig * rig_index + topic;
+}
 constexpr const char* kTopicNames[] = {"telemetry", "telemetry_decimated", "telemetry_batch", "status", "command_reply"};
 
 std::shared_ptr<const std::string> shared(std::string s) { return std::make_shared<const std::string>(std::move(s)); }
@@ -89,6 +94,8 @@ class LiveServer final : public RigSink {
   json channels_of(const Rig& rig) const;
   json services_of(const Rig& rig) const;
   void publish_locked(std::uint32_t channel, std::uint64_t log_time_ns, const std::string& payload, bool protocol);
+  /// A Status or CommandReply on its rig's channel, stamped with the wall clock.
+  void publish_now(const std::string& rig_id, std::uint32_t topic, const json& message);
   void broadcast_locked(const std::string& text);
   void send_protocol_locked(Client& c, std::string data, bool binary);
   void schedule_drain_locked(Client& c);
@@ -159,7 +166,7 @@ json LiveServer::channels_of(const Rig& rig) const {
                          "pvcgel.v1.CommandReply"};
   json channels = json::array();
   for (std::uint32_t k = 0; k < kTopics; ++k)
-    channels.push_back({{"id", 1 + 8 * rig.index + k},
+    channels.push_back({{"id", channel_id(rig.index, k)},
                         {"topic", "/" + rig.id + "/" + kTopicNames[k]},
                         {"encoding", "json"},
                         {"schemaName", names[k]},
@@ -253,30 +260,25 @@ void LiveServer::on_telemetry(const pvcgel_v1_Telemetry& t) {
   if (!found) return;
   Rig& rig = *found;
   rig.batcher.add(t);
-  const std::uint32_t base = 1 + 8 * rig.index;
   const bool decimated = rig.decimation_count++ % static_cast<std::uint64_t>(opt_.foxglove_decimation) == 0;
-  const bool every = subscribed_locked(base + telemetry);
-  if (!every && !(decimated && subscribed_locked(base + telemetry_decimated))) return;  // nobody wants this sample alone
+  const bool every = subscribed_locked(channel_id(rig.index, telemetry));
+  if (!every && !(decimated && subscribed_locked(channel_id(rig.index, telemetry_decimated)))) return;  // nobody wants this sample alone
   const std::string payload = to_json(t).dump();
   const auto stamp = static_cast<std::uint64_t>(t.stamp_ns);
-  if (every) publish_locked(base + telemetry, stamp, payload, false);
-  if (decimated) publish_locked(base + telemetry_decimated, stamp, payload, false);
+  if (every) publish_locked(channel_id(rig.index, telemetry), stamp, payload, false);
+  if (decimated) publish_locked(channel_id(rig.index, telemetry_decimated), stamp, payload, false);
 }
 
-void LiveServer::on_status(const pvcgel_v1_Status& s) {
-  std::lock_guard lock(mutex_);
-  const Rig* rig = rig_locked(s.rig_id);
-  if (!rig) return;
-  const auto now_ns = static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count());
-  publish_locked(1 + 8 * rig->index + status, now_ns, to_json(s).dump(), true);
-}
+void LiveServer::on_status(const pvcgel_v1_Status& s) { publish_now(s.rig_id, status, to_json(s)); }
 
-void LiveServer::on_reply(const pvcgel_v1_CommandReply& r) {
+void LiveServer::on_reply(const pvcgel_v1_CommandReply& r) { publish_now(r.rig_id, command_reply, to_json(r)); }
+
+void LiveServer::publish_now(const std::string& rig_id, std::uint32_t topic, const json& message) {
   std::lock_guard lock(mutex_);
-  const Rig* rig = rig_locked(r.rig_id);
+  const Rig* rig = rig_locked(rig_id);
   if (!rig) return;
   const auto now_ns = static_cast<std::uint64_t>(std::chrono::system_clock::now().time_since_epoch().count());
-  publish_locked(1 + 8 * rig->index + command_reply, now_ns, to_json(r).dump(), true);
+  publish_locked(channel_id(rig->index, topic), now_ns, message.dump(), true);
 }
 
 void LiveServer::on_presence(const std::string& rig, bool present) {
@@ -299,7 +301,7 @@ void LiveServer::on_tick() {
     std::uint64_t log_time_ns = 0;
     json batch = rig->batcher.take(log_time_ns);
     batch["rig_id"] = rig->id;
-    publish_locked(1 + 8 * rig->index + telemetry_batch, log_time_ns, batch.dump(), false);
+    publish_locked(channel_id(rig->index, telemetry_batch), log_time_ns, batch.dump(), false);
   }
 }
 
@@ -435,8 +437,8 @@ void LiveServer::handle_text(Client& c, const std::string& text) {
           !s["channelId"].is_number_unsigned())
         throw std::runtime_error("subscribe: each subscription needs unsigned \"id\" and \"channelId\"");
       const auto channel = s["channelId"].get<std::uint32_t>();
-      const auto rig = (channel - 1) / 8;
-      if (channel == 0 || rig >= rig_by_index_.size() || (channel - 1) % 8 >= kTopics) {
+      const auto rig = (channel - 1) / kChannelsPerRig;
+      if (channel == 0 || rig >= rig_by_index_.size() || (channel - 1) % kChannelsPerRig >= kTopics) {
         status(2, "subscribe: unknown channel " + std::to_string(channel));
         continue;
       }
