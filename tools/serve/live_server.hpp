@@ -28,8 +28,10 @@ struct ServeOptions {
   /// Folder with index.html, app.js, style.css and node_modules/uplot/dist.
   std::string web_root;
   int page_decimation = 10;       ///< the page plots every n-th sample (exact statistics use all)
-  /// One page frame per batch: 32 batches/s, >= 30 frames/s with a margin (each frame costs CPU in the browser).
-  double page_batch_period_s = 1.0 / 32;
+  /// The page draws its plots once per batch and scrolls them between batches
+  /// (it runs 0.25 s behind the newest sample): 10 draws a second instead of 32
+  /// is most of what the page costs a browser without a GPU.
+  double page_batch_period_s = 0.1;
   int foxglove_decimation = 10;   ///< the decimated Foxglove channel: every n-th sample
 };
 

@@ -18,12 +18,18 @@ const samples = async (client) => Number(await text(client, "samples"));
 
 /** Pixels of each plot's series colours, counted on the four uPlot canvases. */
 const plotInk = (client) => h.evaluate(client, `(() => {
-  const colours = [[[0,102,204],[34,34,34]], [[204,51,0]], [[102,153,0]], [[153,51,153]]];
-  return [...document.querySelectorAll('#plots canvas')].map((cv, i) => {
+  const colours = [[[0,102,204]], [[204,51,0]], [[102,153,0]], [[153,51,153]]];  // y, e, u, d_hat (r's black is also the axes' text)
+  return [...document.querySelectorAll('#plots canvas.moving')].map((cv, i) => {
     const d = cv.getContext('2d').getImageData(0, 0, cv.width, cv.height).data;
     let n = 0;
+    // The canvases are opaque: an antialiased line pixel is the series colour
+    // blended over white, a = (255 - pixel) / (255 - colour) the same in every channel.
+    const blend = (p, c) => {
+      const a = [0, 1, 2].filter((k) => c[k] < 200).map((k) => (255 - d[p + k]) / (255 - c[k]));
+      return Math.min(...a) > 0.4 && Math.max(...a) - Math.min(...a) < 0.2 && [0, 1, 2].every((k) => c[k] < 200 || d[p + k] > 200);
+    };
     for (let p = 0; p < d.length; p += 4)
-      for (const [r, g, b] of colours[i] ?? []) if (Math.abs(d[p]-r) < 40 && Math.abs(d[p+1]-g) < 40 && Math.abs(d[p+2]-b) < 40 && d[p+3] > 100) { n++; break; }
+      for (const c of colours[i] ?? []) if (blend(p, c)) { n++; break; }
     return n;
   });
 })()`);
@@ -66,6 +72,15 @@ try {
   console.log(`screenshot: ${file}`);
   const fps = await h.evaluate(client, `new Promise((r) => { const f0 = pvcgelStats.frames; setTimeout(() => r((pvcgelStats.frames - f0) / 2), 2000); })`);
   console.log(`measured: page draws ${fps.toFixed(1)} frames/s`);
+  // The plots scroll between draws: the canvases move, and the right edge stays
+  // just behind the newest sample (the page's display lag, 0.25 s).
+  const moves = await h.evaluate(client, `new Promise((r) => { const c = document.querySelector('#plots canvas.moving');
+    let last = c.style.transform, n = 0;
+    const t = setInterval(() => { if (c.style.transform !== last) { n++; last = c.style.transform; } }, 10);
+    setTimeout(() => { clearInterval(t); r(n); }, 500); })`);
+  h.check(moves >= 5, `the plots scroll between draws: the first canvas moved ${moves} times in 0.5 s`);
+  const lags = await h.evaluate(client, `new Promise((r) => { const l = []; const t = setInterval(() => l.push(pvcgelStats.lag_s), 50); setTimeout(() => { clearInterval(t); r(l); }, 1000); })`);
+  h.check(lags.every((l) => l >= 0 && l < 0.6), `the right edge is 0-0.6 s behind the newest sample: ${Math.min(...lags).toFixed(3)}-${Math.max(...lags).toFixed(3)} s`);
 
   // The daemon goes away: "no daemon"; it comes back: the page recovers by itself.
   const gone = await h.stop(daemon, "SIGTERM");

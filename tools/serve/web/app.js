@@ -6,7 +6,7 @@ const WINDOW_S = 10;          // plots and statistics cover the last 10 s of loo
 const NO_DAEMON_AFTER_MS = 2500;  // Status comes at >= 2 Hz
 const $ = (id) => document.getElementById(id);
 
-const stats = { frames: 0, samples: 0, batches: 0, gaps: 0 };
+const stats = { frames: 0, samples: 0, batches: 0, gaps: 0, lag_s: null };
 window.pvcgelStats = stats;   // read by the tests and the benchmark
 
 let ws = null;
@@ -77,52 +77,143 @@ let dirty = false;
 
 function clearData() {
   cols.clear();
+  tDisplay = null;
   batches = [];
   dirty = true;
 }
 
-const xRange = () => {
-  const end = cols.lastT() ?? WINDOW_S;
-  return [Math.max(0, end - WINDOW_S), Math.max(WINDOW_S, end)];
-};
-
+// The plots scroll like a strip chart. uPlot draws each plot once per batch
+// (10 a second) over the visible 10 s plus LEAD_S ahead; between draws the
+// canvas only moves left by whole pixels (a compositor transform, no redraw).
+// In a browser without a GPU, redrawing four canvases 32 times a second cost
+// ~20 % of a core, moving them costs a few %. The display runs LAG_S behind
+// the newest sample, so the right edge always has data; y's axis stays put
+// because a copy of it, made at each draw, covers the canvas's left edge.
+const LAG_S = 0.25;           // > one batch (0.1 s) plus its jitter
+const LEAD_S = 0.6;           // drawn beyond the right edge: LAG_S plus the motion until the next draw
+const FRAME_MS = 1000 / 32;   // >= 30 frames/s with a margin; each frame costs CPU without a GPU
 const PLOT_HEIGHT = 150;
+let tRef = WINDOW_S;          // loop time at the right edge when the plots were last drawn
+let tDisplay = null;          // loop time at the right edge now
+let lastTickMs = 0;
+let resizePending = false;
 
-function makePlot(title, series, yLabel, legend) {
-  const width = Math.max(400, $("plots").clientWidth - 10);
-  return new uPlot({
-    title, width, height: PLOT_HEIGHT,
-    scales: { x: { time: false, range: () => xRange() } },
-    // What a browser without a GPU redraws in software 32 times a second, kept
-    // lean: tick labels every second and every ~30 px (each is text shaped and
-    // rasterised again per frame), lines, grid and ticks 1 px wide (a wider
-    // antialiased stroke of ~1000 points costs several times as much).
-    axes: [{ label: "loop time (s)", space: 90, size: 30, labelSize: 20, grid: { width: 1 }, ticks: { width: 1 } },
+/** Runs `make` with every 2D context created opaque ({alpha: false}). uPlot has
+ *  no option for it; an opaque canvas lets a software compositor copy the moving
+ *  canvas instead of blending it over the page 32 times a second. */
+function withOpaqueCanvases(make) {
+  const getContext = HTMLCanvasElement.prototype.getContext;
+  HTMLCanvasElement.prototype.getContext = function (type, attributes) {
+    return getContext.call(this, type, { ...attributes, alpha: false });
+  };
+  try { return make(); } finally { HTMLCanvasElement.prototype.getContext = getContext; }
+}
+
+/** An opaque canvas clears to black: uPlot's clear, then the page's white. */
+function fillWhite(u) {
+  u.ctx.fillStyle = "#fff";
+  u.ctx.fillRect(0, 0, u.ctx.canvas.width, u.ctx.canvas.height);
+}
+
+function makePlot(title, series, yLabel, keys) {
+  const box = document.createElement("div");
+  box.className = "plot";
+  $("plots").appendChild(box);
+  const p = { box, keys, pxPerS: 0, shiftPx: 0 };
+  p.u = withOpaqueCanvases(() => new uPlot({
+    title, width: 600, height: PLOT_HEIGHT,
+    padding: [8, 8, 0, 0],   // fixed (uPlot's default follows the tick labels), so the plot area keeps its place
+    scales: { x: { time: false, range: () => [tRef - WINDOW_S, tRef + LEAD_S] } },
+    // Lean for software rasterising: tick labels every second and every ~30 px,
+    // lines, grid and ticks 1 px wide. The time axis's name is in the caption
+    // above the plots: drawn on the moving canvas it would wobble.
+    axes: [{ space: 90, size: 24, grid: { width: 1 }, ticks: { width: 1 } },
       { label: yLabel, space: 30, grid: { width: 1 }, ticks: { width: 1 } }],
     series: [{ label: "t (s)" }, ...series],
-    legend: { show: legend, live: false },
+    legend: { show: false },
     cursor: { show: false },
-  }, [[]], $("plots"));
+    hooks: { drawClear: [fillWhite], draw: [() => copyAxis(p)] },
+  }, [[]], box));
+  p.axis = document.createElement("canvas");
+  p.axis.className = "y-axis";
+  box.appendChild(p.axis);
+  p.u.ctx.canvas.classList.add("moving");
+  sizePlot(p);
+  return p;
+}
+
+/** The visible part (the box) shows exactly WINDOW_S of the plot area; the
+ *  canvas is LEAD_S wider, to the right. */
+function sizePlot(p) {
+  const visible = Math.max(400, $("plots").clientWidth - 10);
+  const left = p.u.bbox.left / devicePixelRatio;
+  const right = p.u.width - left - p.u.bbox.width / devicePixelRatio;
+  p.sizedLeft = left;
+  p.pxPerS = (visible - left) / WINDOW_S;
+  p.box.style.width = `${visible}px`;
+  p.u.setSize({ width: Math.round(left + p.pxPerS * (WINDOW_S + LEAD_S) + right), height: PLOT_HEIGHT });
+}
+
+/** After each draw: a copy of the y axis (left of the plot area) for the box's
+ *  left edge; a y axis that widened with its labels resizes the plot at the next frame. */
+function copyAxis(p) {
+  if (!p.axis) return;
+  if (p.u.bbox.left / devicePixelRatio !== p.sizedLeft) resizePending = true;
+  const src = p.u.ctx.canvas, w = Math.round(p.u.bbox.left), h = src.height;
+  if (p.axis.width !== w || p.axis.height !== h) {
+    p.axis.width = w; p.axis.height = h;
+    p.axis.style.width = `${w / devicePixelRatio}px`;
+    p.axis.style.height = `${h / devicePixelRatio}px`;
+    p.axis.style.top = `${src.getBoundingClientRect().top - p.box.getBoundingClientRect().top}px`;
+  }
+  const ctx = p.axis.getContext("2d");
+  ctx.fillStyle = "#fff";
+  ctx.fillRect(0, 0, w, h);
+  ctx.drawImage(src, 0, 0, w, h, 0, 0, w, h);
 }
 
 const plots = [
   // r dashed on top of y: both show where they coincide.
-  { plot: makePlot("displacement y (blue) and reference r (black), um", [{ label: "y (um)", stroke: "#06c" }, { label: "r (um)", stroke: "#222", dash: [6, 6] }], "um", true), keys: ["y", "r"] },
-  { plot: makePlot("tracking error e = r - y, um", [{ label: "e (um)", stroke: "#c30" }], "um", false), keys: ["e"] },
-  { plot: makePlot("amplifier voltage u, V", [{ label: "u (V)", stroke: "#690" }], "V", false), keys: ["u"] },
-  { plot: makePlot("disturbance estimate d_hat (linear-block input units)", [{ label: "d_hat", stroke: "#939" }], "d_hat", false), keys: ["d"] },
+  makePlot("displacement y (blue) and reference r (black, dashed), um", [{ label: "y (um)", stroke: "#06c" }, { label: "r (um)", stroke: "#222", dash: [6, 6] }], "um", ["y", "r"]),
+  makePlot("tracking error e = r - y, um", [{ label: "e (um)", stroke: "#c30" }], "um", ["e"]),
+  makePlot("amplifier voltage u, V", [{ label: "u (V)", stroke: "#690" }], "V", ["u"]),
+  makePlot("disturbance estimate d_hat (linear-block input units)", [{ label: "d_hat", stroke: "#939" }], "d_hat", ["d"]),
 ];
 
-// Everything the page changes is changed in one animation frame per batch
-// (pvcgel serve sends 32 a second: >= 30 frames/s, and not more, since in a
+/** The display clock: follows the wall clock, steered (rate 1 +- the error per
+ *  second, at most 50 %) to stay LAG_S behind the newest sample, never past it
+ *  (a stalled daemon freezes the plots); jumps at a start, restart or long stall. */
+function advanceDisplay(nowMs) {
+  const latest = cols.lastT();
+  const dt = lastTickMs ? Math.min(0.2, (nowMs - lastTickMs) / 1000) : 0;
+  lastTickMs = nowMs;
+  if (latest === null) return;
+  const error = latest - LAG_S - tDisplay;
+  if (tDisplay === null || !(Math.abs(error) < 1)) tDisplay = latest - LAG_S;
+  else tDisplay = Math.min(latest, tDisplay + dt * (1 + Math.max(-0.5, Math.min(0.5, error))));
+}
+
+/** Moves a plot's canvas so that the box's right edge shows tDisplay (whole
+ *  pixels: a fractional shift would be resampled). Returns whether it moved. */
+function shiftPlot(p) {
+  const px = Math.round((tDisplay - tRef) * p.pxPerS);
+  if (px === p.shiftPx) return false;
+  p.shiftPx = px;
+  p.u.ctx.canvas.style.transform = `translateX(${-px}px)`;
+  return true;
+}
+
+// One animation frame every FRAME_MS (a timer, not every display refresh: in a
 // browser without a GPU every frame, even one that changes nothing, costs
-// about a millisecond of CPU); text only every 250 ms.
+// about a millisecond of CPU): the plots move, are drawn again when a batch
+// brought data, and text changes every 250 ms.
 let frameRequested = false;
 function requestFrame() {
   if (frameRequested) return;
   frameRequested = true;
   requestAnimationFrame(render);
 }
+setInterval(requestFrame, FRAME_MS);
 
 /** Sets text only when it changed (an unchanged assignment still relayouts). */
 function setText(id, text, className) {
@@ -136,11 +227,22 @@ let lastTextMs = 0;
 
 function render(now) {
   frameRequested = false;
-  if (dirty) {
-    dirty = false;
-    for (const p of plots) p.plot.setData([cols.view("t"), ...p.keys.map((k) => cols.view(k))]);
-    stats.frames++;
+  advanceDisplay(now);
+  let changed = false;
+  if (resizePending) {
+    resizePending = false;
+    for (const p of plots) sizePlot(p);
+    dirty = true;
   }
+  if (dirty && tDisplay !== null) {
+    dirty = false;
+    tRef = tDisplay;
+    for (const p of plots) p.u.setData([cols.view("t"), ...p.keys.map((k) => cols.view(k))]);
+    changed = true;
+  }
+  if (tDisplay !== null) for (const p of plots) changed = shiftPlot(p) || changed;
+  stats.lag_s = tDisplay === null ? null : cols.lastT() - tDisplay;
+  if (changed) stats.frames++;
   if (now - lastTextMs < TEXT_EVERY_MS) return;
   lastTextMs = now;
   showTracking();
@@ -149,21 +251,18 @@ function render(now) {
   showRate(now);
 }
 
-window.addEventListener("resize", () => {
-  for (const p of plots) p.plot.setSize({ width: Math.max(400, $("plots").clientWidth - 10), height: PLOT_HEIGHT });
-});
+window.addEventListener("resize", () => { resizePending = true; });
 
 function addBatch(b) {
   const last = cols.lastT();
   if (b.t_s.length && last !== null && b.t_s[0] < last - 1) clearData();  // the daemon restarted
   cols.append(b);
   const tEnd = cols.lastT() ?? 0;
-  cols.dropBefore(tEnd - WINDOW_S);
+  cols.dropBefore(tEnd - WINDOW_S - 2 * LAG_S);   // the display runs LAG_S behind
   batches.push({ t: tEnd, n: b.stats_n, sumAbs: b.sum_abs_e_um, sumSq: b.sum_sq_e_um2, max: b.max_abs_e_um });
   while (batches.length && batches[0].t < tEnd - WINDOW_S) batches.shift();
   stats.samples += b.samples; stats.batches++; stats.gaps += b.gaps;
   if (b.t_s.length) dirty = true;   // redraw only when there is something new to show
-  requestFrame();
 }
 
 function showTracking() {
@@ -183,8 +282,6 @@ function showStatus() {
   setText("loop", `${s.cycles} cycles at ${(1 / s.period_s).toFixed(0)} Hz, ${s.overruns} overruns, latency p50/p99/p99.9/max ${s.latency_p50_us.toFixed(0)}/${s.latency_p99_us.toFixed(0)}/${s.latency_p999_us.toFixed(0)}/${s.latency_max_us.toFixed(0)} us, compute p99 ${s.compute_p99_us.toFixed(1)} us`);
   setText("inputs", `${s.commands_accepted} commands, ${s.chunks_accepted} chunks accepted, ${s.rejects_total} refused` + (s.rejects_total ? ` (last: ${s.last_reject_reason_name}: ${s.last_reject_detail})` : ""));
 }
-// Without data (no daemon) nothing else asks for a frame: look twice a second.
-setInterval(requestFrame, 500);
 
 let lastCount = 0, lastCountMs = 0;
 /** The received rate, over about a second, in a text frame. */
@@ -231,7 +328,7 @@ function onMessageData(view) {
   if (!ch) return;
   const msg = JSON.parse(new TextDecoder().decode(new Uint8Array(view.buffer, 13)));
   if (ch.topic === "telemetry_batch") addBatch(msg);
-  else if (ch.topic === "status") { lastStatus = msg; lastStatusMs = Date.now(); requestFrame(); }
+  else if (ch.topic === "status") { lastStatus = msg; lastStatusMs = Date.now(); }
   else if (ch.topic === "command_reply") showReply(`reply to ${msg.client_id}: ${msg.accepted ? "accepted" : msg.reason_name + ": " + msg.detail}`, msg.accepted);
 }
 
