@@ -46,7 +46,7 @@ class WindowColumns {
     if (this.end + n > 2 * this.capacity) this.compact();
     for (const k of KEYS) {
       const src = b[BATCH_KEYS[k]], dst = this.cols[k];
-      // null (a faulted sensor) -> NaN: the canvas skips non-finite points.
+      // null (a faulted sensor) -> NaN here, null again for uPlot (withGaps).
       for (let i = 0; i < n; i++) dst[this.end + i] = src[i] ?? NaN;
     }
     this.end += n;
@@ -69,6 +69,13 @@ class WindowColumns {
     this.end = to - from;
   }
   view(k) { return this.cols[k].subarray(this.start, this.end); }
+}
+
+/** uPlot breaks a line only at null: a column with NaN (a faulted sensor's
+ *  samples) becomes an array with null there, so the plot shows a gap instead
+ *  of joining across it. Columns without NaN (the usual case) pass as views. */
+function withGaps(column) {
+  return column.some(Number.isNaN) ? Array.from(column, (v) => (Number.isNaN(v) ? null : v)) : column;
 }
 
 const cols = new WindowColumns(2048);   // grows if a smaller --page-decimation needs more
@@ -237,7 +244,7 @@ function render(now) {
   if (dirty && tDisplay !== null) {
     dirty = false;
     tRef = tDisplay;
-    for (const p of plots) p.u.setData([cols.view("t"), ...p.keys.map((k) => cols.view(k))]);
+    for (const p of plots) p.u.setData([cols.view("t"), ...p.keys.map((k) => withGaps(cols.view(k)))]);
     changed = true;
   }
   if (tDisplay !== null) for (const p of plots) changed = shiftPlot(p) || changed;
