@@ -120,11 +120,15 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     first.push_back(specs.size());
     auto sp = parameter_specs(kind, d);
     if (data) add_data_starts(kind, sp, *data);
+    // A diagnosed loop must stay compensable (files may hold up to alpha = 1 for the simulated rig).
+    if (kind == EffectKind::hysteresis) sp[0].upper = 0.99 * kMaxCompensatedHysteresisAlpha;
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
   if (time_scale) {
     const double t = o.time_scale_tolerance, f = o.poly_shape_tolerance;
-    specs.push_back({"time_scale", 1.0 / (1.0 + t), 1.0 + t, true, {1.0}});
+    const bool loop = std::find(kinds.begin(), kinds.end(), EffectKind::hysteresis) != kinds.end();
+    specs.push_back({"time_scale", loop ? std::min(o.hysteresis_time_scale_min, 1.0 / (1.0 + t)) : 1.0 / (1.0 + t), 1.0 + t,
+                     true, {1.0}});
     specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
   }
 }
