@@ -761,17 +761,22 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
     auto& c = res.candidates[order[rank]];
     FitSpace space({c.effect.kind}, scale, true, o, &data);
     double best = INFINITY;
+    // A loop may take back a large share of the nominal's lag (a much faster G): start there too.
+    const std::vector<double> time_scales = c.effect.kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4}
+                                                                                     : std::vector<double>{1.0};
     for (const auto& s0 : starts[order[rank]]) {
-      Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
-      z.head(s0.size()) = s0;
-      z.tail(2) = space.z_of({space.effects(z).front()}, Nominal{}).tail(2);
-      double cost = 0.0;
-      z = levenberg_marquardt(problem, space, z, cost);
-      if (cost < best) {
-        best = cost;
-        c.effect = space.effects(z).front();
-        c.time_scale = space.g_scale(z).time_scale;
-        c.poly_shape = space.g_scale(z).shape;
+      for (double ts0 : time_scales) {
+        Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
+        z.head(s0.size()) = s0;
+        z.tail(2) = space.z_of({space.effects(z).front()}, Nominal{ts0}).tail(2);
+        double cost = 0.0;
+        z = levenberg_marquardt(problem, space, z, cost);
+        if (cost < best) {
+          best = cost;
+          c.effect = space.effects(z).front();
+          c.time_scale = space.g_scale(z).time_scale;
+          c.poly_shape = space.g_scale(z).shape;
+        }
       }
     }
     c.fitted = true;
