@@ -77,9 +77,11 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
   switch (kind) {
     case EffectKind::none: return {};
     case EffectKind::hysteresis:
-      // Play widths from sub-volt loops to loops of a large share of the recorded peak-to-peak.
+      // Play widths from sub-volt loops to loops of a large share of the recorded peak-to-peak; the
+      // spread (default 0: the form of older files) frees the loop's shape.
       return {{"alpha", 0.0, 1.0, false, {0.005, 0.02, 0.06, 0.3}},
-              {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, rel(span, {0.01, 0.03, 0.1, 0.3})}};
+              {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, rel(span, {0.01, 0.03, 0.1, 0.3})},
+              {"threshold_spread", -0.85, 3.0, false, {-0.6, 0.0, 1.0}, 0.0}};
     case EffectKind::creep:
       return {{"fraction", -0.5, 0.5, false, {0.003, -0.003, 0.03, -0.03}},
               {"time_constant_s", std::min(20.0 * Ts, 0.1), std::max(10.0 * std::min(d.duration_s, 1e6), 1.0), true,
@@ -131,7 +133,8 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
     case EffectKind::none: return "the nominal model explains the data to within the sensor noise";
     case EffectKind::hysteresis:
       return "rate-independent hysteresis: the effective voltage lags the applied voltage after each reversal "
-             "(Prandtl-Ishlinskii play operators), so rising and falling branches differ";
+             "(Prandtl-Ishlinskii play operators; the spread of their thresholds sets the loop's shape), so rising "
+             "and falling branches differ";
     case EffectKind::creep:
       return "viscoelastic creep: a slow relaxation branch keeps the displacement moving after the fast "
              "dynamics have settled";
@@ -194,6 +197,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     p_[static_cast<size_t>(e.kind)] = e.p;
     if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
   }
+  if (has(EffectKind::hysteresis)) play_r_ = play_thresholds(p(EffectKind::hysteresis)[1], p(EffectKind::hysteresis)[2]);
   // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
   if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
   const auto ss = realize(linear_block(model.G, has(EffectKind::creep), p(EffectKind::creep), has(EffectKind::resonance),
@@ -271,15 +275,12 @@ double AugmentedPlant::input_stage(double x) noexcept {
   }
   if (has(EffectKind::dead_zone)) x = dead_zone(x, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
   if (has(EffectKind::hysteresis)) {
-    const auto& q = p(EffectKind::hysteresis);
     double lag = 0.0;
-    for (int i = 0; i < kPlays; ++i) {
-      const double r = q[1] * kPlayQuantiles[static_cast<size_t>(i)];
-      auto& play = plays_[static_cast<size_t>(i)];
-      play = std::clamp(play, x - r, x + r);
-      lag += x - play;
+    for (size_t i = 0; i < plays_.size(); ++i) {
+      plays_[i] = std::clamp(plays_[i], x - play_r_[i], x + play_r_[i]);
+      lag += x - plays_[i];
     }
-    x -= q[0] * lag / kPlays;
+    x -= p(EffectKind::hysteresis)[0] * lag / kPlays;
   }
   return x;
 }

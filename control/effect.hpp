@@ -108,11 +108,29 @@ struct Effect {
 
 /// Number of play operators of the hysteresis effect.
 inline constexpr int kHysteresisPlays = 8;
-/// Play thresholds r_i = threshold_scale_V * kPlayQuantiles[i] (ascending), the
-/// quantiles of an exponential distribution (mean 1): the lag after a reversal
-/// grows linearly, then saturates exponentially.
+/// Play thresholds at threshold_spread 0: r_i = threshold_scale_V * kPlayQuantiles[i]
+/// (ascending), the quantiles of an exponential distribution (mean 1): the lag
+/// after a reversal grows linearly, then saturates exponentially.
 inline constexpr std::array<double, kHysteresisPlays> kPlayQuantiles{0.0645, 0.2076, 0.3677, 0.5596,
                                                                      0.7985, 1.0986, 1.5041, 2.0794};
+
+/// Largest hysteresis alpha the controller compensates (EffectCompensator): the
+/// inverse's slope right after a reversal is 1 / (1 - alpha); above 10 it turns
+/// sensor noise into voltage steps. `pvcgel diagnose` fits alpha below it.
+inline constexpr double kMaxCompensatedHysteresisAlpha = 0.9;
+
+/// The hysteresis effect's play thresholds (ascending, so the operator stays
+/// invertible): r_i = R q_i^(1 + spread), q_i = kPlayQuantiles[i]. The spread
+/// shapes the loop: 0 is the exponential distribution (the form before the
+/// parameter existed); positive spreads the thresholds over more decades
+/// (sub-volt and wide loops at once: a loop that rounds off slowly); negative
+/// gathers them around R (-0.85: within -35%..+10%, a loop with sharp corners,
+/// close to one backlash of width 2R).
+inline std::array<double, kHysteresisPlays> play_thresholds(double R_V, double spread) noexcept {
+  std::array<double, kHysteresisPlays> r{};
+  for (size_t i = 0; i < r.size(); ++i) r[i] = R_V * std::pow(kPlayQuantiles[i], 1.0 + spread);
+  return r;
+}
 
 /// The dead zone effect: no response up to d, linear catch-up to u over the
 /// next w volts, then u (odd, for bipolar drive).
@@ -160,7 +178,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 /// (EffectKind::none) is exactly SimulatedRig without sensor effects.
 /// Candidate forms (the generator in generator.hpp uses different ones):
 ///  - hysteresis: Prandtl-Ishlinskii play operators on the voltage,
-///    x = u - alpha mean_i(u - play_{r_i}(u)), r_i = R i / 8;
+///    x = u - alpha mean_i(u - play_{r_i}(u)), r_i = play_thresholds(R, spread)
+///    (alpha the hysteretic share, R the threshold scale, spread the loop's shape);
 ///  - creep: Kelvin-Voigt branches fraction G(0) / (tau s + 1) in parallel with G: one
 ///    branch, or (spread_decades > 0) three with fraction / 3 each at tau 10^(-spread/2, 0, +spread/2),
 ///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
@@ -239,6 +258,7 @@ class AugmentedPlant final {
   std::array<double, kDelayLine> delay_line_{};
   int head_ = 0;
   std::array<double, kPlays> plays_{};
+  std::array<double, kPlays> play_r_{};  ///< the hysteresis effect's play thresholds
   double slew_state_ = 0.0;
   long sample_ = 0;
   double y_lin_ = 0.0, y_ = 0.0;

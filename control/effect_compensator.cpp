@@ -10,9 +10,6 @@
 namespace pvcgel::control {
 
 namespace {
-/// Largest slope of the hysteresis inverse (1 / (1 - alpha)) accepted: beyond it
-/// the inverse turns sensor noise and small corrections into large voltage steps.
-constexpr double kMaxHysteresisAlpha = 0.9;
 /// Largest slope of the saturation inverse at the stroke voltage_max_V reaches.
 constexpr double kMaxSaturationInverseGain = 4.0;
 /// Measurements closer to the saturation's ceiling (knee + softness) than this
@@ -21,9 +18,9 @@ constexpr double kSaturationCeilingShare = 0.95;
 
 }  // namespace
 
-HysteresisOperator::HysteresisOperator(double alpha, double R) noexcept : a0_(1.0 - alpha), a_(alpha / kN) {
+HysteresisOperator::HysteresisOperator(double alpha, double R, double spread) noexcept
+    : r_(play_thresholds(R, spread)), a0_(1.0 - alpha), a_(alpha / kN) {
   for (size_t i = 0; i < kN; ++i) {
-    r_[i] = R * kPlayQuantiles[i];
     prefix_[i] = a0_ + static_cast<double>(i) * a_;  // A_{i-1}
     b_[i] = -a_ / ((prefix_[i] + a_) * prefix_[i]);
     double s = a0_ * r_[i];
@@ -68,7 +65,8 @@ EffectCompensator::EffectCompensator(const HammersteinModel& model, std::span<co
     effects_[static_cast<size_t>(count_++)] = e;
   }
   refuse_unsafe(model, voltage_max_V, operating_point_um);
-  if (has(EffectKind::hysteresis)) hysteresis_ = HysteresisOperator(p(EffectKind::hysteresis)[0], p(EffectKind::hysteresis)[1]);
+  if (has(EffectKind::hysteresis)) hysteresis_ = HysteresisOperator(p(EffectKind::hysteresis)[0], p(EffectKind::hysteresis)[1],
+                                                                p(EffectKind::hysteresis)[2]);
   if (has(EffectKind::slew_limit)) slew_step_V_ = p(EffectKind::slew_limit)[0] * Ts;
   if (has(EffectKind::delay)) {
     const double d = p(EffectKind::delay)[0] / Ts;
@@ -97,12 +95,12 @@ void EffectCompensator::refuse_unsafe(const HammersteinModel& model, double volt
                                        " cannot be compensated: its inverse is a G^-1 whose time scale depends on the "
                                        "state, which this controller does not run; remove the table (the disturbance "
                                        "observer then rejects it as a disturbance)");
-  if (has(EffectKind::hysteresis) && p(EffectKind::hysteresis)[0] >= kMaxHysteresisAlpha)
+  if (has(EffectKind::hysteresis) && p(EffectKind::hysteresis)[0] >= kMaxCompensatedHysteresisAlpha)
     throw ConfigError(key(EffectKind::hysteresis) + ".alpha",
                       format("alpha = %.3g: the inverse's slope after a reversal, 1 / (1 - alpha) = %.3g, is above "
                              "%.0f; it would turn sensor noise into voltage steps. Refit, or remove the table",
                              p(EffectKind::hysteresis)[0], 1.0 / (1.0 - p(EffectKind::hysteresis)[0]),
-                             1.0 / (1.0 - kMaxHysteresisAlpha)));
+                             1.0 / (1.0 - kMaxCompensatedHysteresisAlpha)));
   if (has(EffectKind::dead_zone)) {
     const auto& q = p(EffectKind::dead_zone);
     if (q[0] + q[1] >= voltage_max_V)

@@ -29,8 +29,9 @@ namespace pvcgel::control {
 class HysteresisOperator final {
  public:
   HysteresisOperator() = default;
-  /// @param alpha  in [0, 1); @param threshold_scale_V  R > 0 (r_i = R kPlayQuantiles[i])
-  HysteresisOperator(double alpha, double threshold_scale_V) noexcept;
+  /// @param alpha  in [0, 1); @param threshold_scale_V  R > 0; @param threshold_spread  the loop's shape
+  /// (r_i = play_thresholds(R, spread), ascending for every spread: the inverse below holds for all)
+  HysteresisOperator(double alpha, double threshold_scale_V, double threshold_spread = 0.0) noexcept;
 
   /// H[x] from the current state, without advancing it.
   [[nodiscard]] double forward(double x_V) const noexcept;

@@ -120,11 +120,15 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     first.push_back(specs.size());
     auto sp = parameter_specs(kind, d);
     if (data) add_data_starts(kind, sp, *data);
+    // A diagnosed loop must stay compensable (files may hold up to alpha = 1 for the simulated rig).
+    if (kind == EffectKind::hysteresis) sp[0].upper = 0.99 * kMaxCompensatedHysteresisAlpha;
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
   if (time_scale) {
     const double t = o.time_scale_tolerance, f = o.poly_shape_tolerance;
-    specs.push_back({"time_scale", 1.0 / (1.0 + t), 1.0 + t, true, {1.0}});
+    const bool loop = std::find(kinds.begin(), kinds.end(), EffectKind::hysteresis) != kinds.end();
+    specs.push_back({"time_scale", loop ? std::min(o.hysteresis_time_scale_min, 1.0 / (1.0 + t)) : 1.0 / (1.0 + t), 1.0 + t,
+                     true, {1.0}});
     specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
   }
 }
@@ -738,15 +742,26 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
         }
       grid = std::move(next);
     }
-    for (auto& g : grid) g.first = problem.residual(space.effects(g.second), 1.0).squaredNorm();
-    std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-    CandidateResult c;
-    c.specs = space.specs;
-    c.evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
-    c.effect = space.effects(grid.front().second).front();
-    res.candidates.push_back(c);
-    std::vector<Eigen::VectorXd> best;
-    for (size_t i = 0; i < std::min<size_t>(grid.size(), 2); ++i) best.push_back(grid[i].second);
+    // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
+    // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
+    std::vector<Eigen::VectorXd> best;  // each with its time-scale start appended
+    double best_cost = INFINITY;
+    for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {
+      for (auto& g : grid) g.first = problem.residual(space.effects(g.second), ts).squaredNorm();
+      std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      if (ts == 1.0) {  // the evidence: at the nominal's time scale, as for every candidate
+        best_cost = grid.front().first;
+        CandidateResult c;
+        c.effect = space.effects(grid.front().second).front();
+        c.specs = space.specs;
+        res.candidates.push_back(c);
+      }
+      for (size_t i = 0; i < std::min<size_t>(grid.size(), 2); ++i) {
+        best.emplace_back(grid[i].second.size() + 1);
+        best.back() << grid[i].second, ts;
+      }
+    }
+    res.candidates.back().evidence_r2 = std::max(0.0, 1.0 - best_cost / nuisance_cost);
     starts.push_back(best);
   }
   std::vector<size_t> order(res.candidates.size());
@@ -755,21 +770,34 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank) {
     auto& c = res.candidates[order[rank]];
-    FitSpace space({c.effect.kind}, scale, true, o, &data);
-    double best = INFINITY;
-    for (const auto& s0 : starts[order[rank]]) {
-      Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
-      z.head(s0.size()) = s0;
-      z.tail(2) = space.z_of({space.effects(z).front()}, Nominal{}).tail(2);
-      double cost = 0.0;
-      z = levenberg_marquardt(problem, space, z, cost);
-      if (cost < best) {
-        best = cost;
-        c.effect = space.effects(z).front();
-        c.time_scale = space.g_scale(z).time_scale;
-        c.poly_shape = space.g_scale(z).shape;
+    const FitSpace space({c.effect.kind}, scale, true, o, &data);
+    // A loop is fitted with the earlier shape (threshold_spread 0) too; the free shape is kept only when it
+    // fits clearly better: on short or closed-loop data it otherwise bends to the fit segment alone.
+    std::vector<FitSpace> spaces{space};
+    if (c.effect.kind == EffectKind::hysteresis) {
+      spaces.push_back(space);
+      auto& spread = spaces.back().specs[2];
+      spread.lower = spread.upper = 0.0;
+      spread.fixed = true;
+    }
+    std::vector<double> best(spaces.size(), INFINITY);
+    std::vector<CandidateResult> fits(spaces.size(), c);
+    for (size_t v = 0; v < spaces.size(); ++v) {
+      for (const auto& s0 : starts[order[rank]]) {
+        Eigen::VectorXd z(static_cast<Eigen::Index>(spaces[v].specs.size()));
+        z.head(s0.size() - 1) = s0.head(s0.size() - 1);
+        z.tail(2) = spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(2);
+        double cost = 0.0;
+        z = levenberg_marquardt(problem, spaces[v], z, cost);
+        if (cost < best[v]) {
+          best[v] = cost;
+          fits[v].effect = spaces[v].effects(z).front();
+          fits[v].time_scale = spaces[v].g_scale(z).time_scale;
+          fits[v].poly_shape = spaces[v].g_scale(z).shape;
+        }
       }
     }
+    c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
     c.fitted = true;
     const std::vector<Effect> e{c.effect};
     const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape), true);

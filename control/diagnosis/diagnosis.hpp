@@ -28,6 +28,12 @@ struct DiagnosisOptions {
   int max_undeclared_delay_samples = 2;  ///< an undeclared I/O delay is searched over 0..this (hold conventions)
   double gain_tolerance = 0.25;       ///< nominal refit: overall gain within [1/(1+tol), 1+tol]
   double time_scale_tolerance = 0.25; ///< nominal refit: G's time constants scaled within [1/(1+tol), 1+tol]
+  /// Fits with hysteresis may make G faster, down to this time scale: a nominal identified on data with a
+  /// loop has drawn part of it as lag (a slower G), which the loop takes back.
+  double hysteresis_time_scale_min = 0.1;
+  /// The loop's free shape (threshold_spread) is kept only when it lowers the fit-segment MSE of the loop
+  /// with the earlier shape (spread 0) by this share; below it the two-parameter loop is reported.
+  double hysteresis_shape_min_gain = 0.25;
   double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves

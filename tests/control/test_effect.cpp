@@ -198,6 +198,7 @@ TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
       "[[sim.truth.effect]]\nname = \"creep\"\nfraction = 0.02\ntime_constant_s = 5.0\n");
   ASSERT_EQ(two.size(), 2u);
   EXPECT_EQ(two[0].kind, EffectKind::hysteresis);
+  EXPECT_DOUBLE_EQ(two[0].p[2], 0.0);  // threshold_spread: optional, the earlier exponential thresholds
   EXPECT_EQ(two[1].kind, EffectKind::creep);
   EXPECT_DOUBLE_EQ(two[1].p[1], 5.0);
   EXPECT_DOUBLE_EQ(two[1].p[2], 0.0);  // spread_decades: optional, one branch
@@ -205,6 +206,28 @@ TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
   ASSERT_EQ(one.size(), 1u);
   EXPECT_DOUBLE_EQ(one[0].p[2], 0.0);  // direct_fraction: optional, a full mode
   EXPECT_TRUE(parse_effects("[sim.truth]\n").empty());
+}
+
+TEST(EffectTables, HysteresisThresholdSpreadIsReadAndBounded) {
+  const auto shaped = parse_effects("[[sim.truth.effect]]\nname = \"hysteresis\"\nalpha = 0.5\nthreshold_scale_V = 0.02\n"
+                                    "threshold_spread = 1.5\n");
+  ASSERT_EQ(shaped.size(), 1u);
+  EXPECT_DOUBLE_EQ(shaped[0].p[2], 1.5);
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"hysteresis\"\nalpha = 0.5\nthreshold_scale_V = 20.0\n"
+                        "threshold_spread = -1.0\n"),
+            "sim.truth.effect[0].threshold_spread");  // -1 would put every play at R (equal thresholds)
+}
+
+TEST(AugmentedPlant, HysteresisThresholdsAtSpreadZeroAreTheEarlierForm) {
+  // Files written before threshold_spread existed mean r_i = R kPlayQuantiles[i], exactly.
+  const auto r = play_thresholds(20.0, 0.0);
+  for (size_t i = 0; i < r.size(); ++i) EXPECT_EQ(r[i], 20.0 * kPlayQuantiles[i]);
+  // Every spread keeps them ascending (the compensator's inverse needs that); a positive one widens their range.
+  for (double spread : {-0.85, -0.3, 1.0, 3.0}) {
+    const auto q = play_thresholds(20.0, spread);
+    for (size_t i = 1; i < q.size(); ++i) EXPECT_LT(q[i - 1], q[i]) << "spread " << spread;
+    EXPECT_EQ(q.back() / q.front() > r.back() / r.front(), spread > 0.0) << "spread " << spread;
+  }
 }
 
 TEST(EffectTables, ErrorsNameTheElementAndKey) {

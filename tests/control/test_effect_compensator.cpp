@@ -28,8 +28,13 @@ std::vector<double> random_history(std::uint64_t seed, int n) {
 }
 
 TEST(HysteresisOperator, InverseUndoesForwardOverRandomHistoriesWithReversals) {
-  for (const auto& [alpha, R] : std::vector<std::pair<double, double>>{{0.05, 20.0}, {0.3, 100.0}, {0.85, 5.0}}) {
-    HysteresisOperator H(alpha, R);
+  // Every loop shape diagnose fits: narrow, wide, thresholds gathered (-0.85) or spread over decades (3).
+  struct Case {
+    double alpha, R, spread;
+  };
+  for (const auto& [alpha, R, spread] : std::vector<Case>{
+           {0.05, 20.0, 0.0}, {0.3, 100.0, 0.0}, {0.85, 5.0, 0.0}, {0.6, 30.0, -0.85}, {0.89, 10.0, 3.0}, {0.4, 300.0, 1.5}}) {
+    HysteresisOperator H(alpha, R, spread);
     H.reset(500.0);
     double worst_x = 0.0, worst_h = 0.0;
     for (double u : random_history(7, 20000)) {
@@ -38,17 +43,17 @@ TEST(HysteresisOperator, InverseUndoesForwardOverRandomHistoriesWithReversals) {
       worst_h = std::max(worst_h, std::abs(H.forward(H.inverse(h)) - h));
       H.commit(u);
     }
-    EXPECT_LT(worst_x, 1e-9) << "alpha " << alpha << ", R " << R;
-    EXPECT_LT(worst_h, 1e-9) << "alpha " << alpha << ", R " << R;
+    EXPECT_LT(worst_x, 1e-9) << "alpha " << alpha << ", R " << R << ", spread " << spread;
+    EXPECT_LT(worst_h, 1e-9) << "alpha " << alpha << ", R " << R << ", spread " << spread;
   }
 }
 
 TEST(HysteresisOperator, IsTheOperatorAugmentedPlantRuns) {
   // f(x) = x and a G that settles within one sample: the plant's output is its hysteresis operator.
   const HammersteinModel unit{OddPolynomial({1.0}), TransferFunction({1.0}, {1e-6, 1.0})};
-  const Effect e{EffectKind::hysteresis, {0.2, 40.0}};
+  const Effect e{EffectKind::hysteresis, {0.2, 40.0, 1.2}};
   AugmentedPlant plant(unit, 0.0, 1e-3, e);
-  HysteresisOperator H(0.2, 40.0);
+  HysteresisOperator H(0.2, 40.0, 1.2);
   plant.reset_steady_state(300.0);
   H.reset(300.0);
   double worst = 0.0;

@@ -82,7 +82,7 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
   // Every effect `pvcgel diagnose` can write into [[sim.truth.effect]], alone and in mixtures of two
   // (every effect paired with its neighbour in this list, log-type creep and a partial mode included).
   const std::vector<Effect> effects{
-      {EffectKind::hysteresis, {0.02, 20.0}},  {EffectKind::creep, {0.01, 3.0, 1.5}},
+      {EffectKind::hysteresis, {0.02, 20.0, 1.5}}, {EffectKind::creep, {0.01, 3.0, 1.5}},
       {EffectKind::dead_zone, {20.0, 30.0}},   {EffectKind::saturation, {100.0, 500.0}},
       {EffectKind::delay, {2.5e-3}},           {EffectKind::asymmetric_dynamics, {0.3}},
       {EffectKind::slew_limit, {2000.0}},      {EffectKind::resonance, {20.0, 0.1, 0.95}},
@@ -113,7 +113,7 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
 TEST(NoAllocation, ControllerCompensatingEachEffectAndMixturesDoesNotAllocate) {
   // Every effect the controller compensates ([[model.effect]]), alone and in mixtures of two,
   // in every mode (switches included), on a rig whose truth has the same effects.
-  const std::vector<Effect> effects{{EffectKind::hysteresis, {0.1, 30.0}}, {EffectKind::creep, {0.05, 10.0, 1.0}},
+  const std::vector<Effect> effects{{EffectKind::hysteresis, {0.1, 30.0, -0.5}}, {EffectKind::creep, {0.05, 10.0, 1.0}},
                                     {EffectKind::dead_zone, {20.0, 30.0}}, {EffectKind::saturation, {100.0, 50.0}},
                                     {EffectKind::delay, {2.5e-3}},         {EffectKind::slew_limit, {20000.0}},
                                     {EffectKind::drift, {0.1, 0.01, 1.0}}};

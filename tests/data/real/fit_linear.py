@@ -1,28 +1,53 @@
 # Best linear model of a recording: y = K * G(s) u + c with G = 1/(tau s + 1), by least squares:
 # a log grid over tau (Ts/2 .. 2 s), K and c by linear least squares on the ZOH-discretised response
 # (u held over each sample, the daemon's convention with no I/O delay). Pure Python (no numpy).
+# With a third argument N > 1, f is the project's odd polynomial c1 u + c2 u^3 + ... (N terms) instead of
+# K u: the best Hammerstein model without hysteresis (a static curvature is then not blamed on a loop).
 import sys, math, csv
 path, out = sys.argv[1], sys.argv[2]
+terms = int(sys.argv[3]) if len(sys.argv) > 3 else 1
 t, u, y = [], [], []
 with open(path) as f:
     rows = [l for l in f if not l.startswith('#')]
 for r in csv.DictReader(rows):
     t.append(float(r['t_s'])); u.append(float(r['u_V'])); y.append(float(r['y_um']))
 Ts = t[1] - t[0]; n = len(u)
+
+
+def solve(A, b):
+    """Gaussian elimination with partial pivoting (A small and square)."""
+    m = len(b); M = [row[:] + [b[i]] for i, row in enumerate(A)]
+    for c in range(m):
+        p = max(range(c, m), key=lambda i: abs(M[i][c])); M[c], M[p] = M[p], M[c]
+        for i in range(c + 1, m):
+            f = M[i][c] / M[c][c]
+            for j in range(c, m + 1): M[i][j] -= f * M[c][j]
+    x = [0.0] * m
+    for i in reversed(range(m)):
+        x[i] = (M[i][m] - sum(M[i][j] * x[j] for j in range(i + 1, m))) / M[i][i]
+    return x
+
+
 best = None
 for i in range(80):
     tau = Ts / 2 * (2.0 / (Ts / 2)) ** (i / 79)
     a = math.exp(-Ts / tau)
-    x = [u[0]] * n
-    for k in range(1, n):
-        x[k] = a * x[k - 1] + (1 - a) * u[k - 1]
-    sx = sum(x); sy = sum(y); sxx = sum(v * v for v in x); sxy = sum(p * q for p, q in zip(x, y))
-    K = (n * sxy - sx * sy) / (n * sxx - sx * sx); c = (sy - K * sx) / n
-    r = math.sqrt(sum((K * p + c - q) ** 2 for p, q in zip(x, y)) / n)
+    cols = []
+    for p in range(terms):  # G applied to u^(2p+1), at rest at u[0] (G(0) = 1)
+        v = [w ** (2 * p + 1) for w in u]; x = [v[0]] * n
+        for k in range(1, n):
+            x[k] = a * x[k - 1] + (1 - a) * v[k - 1]
+        cols.append(x)
+    cols.append([1.0] * n)
+    A = [[sum(p * q for p, q in zip(ci, cj)) for cj in cols] for ci in cols]
+    coef = solve(A, [sum(p * q for p, q in zip(ci, y)) for ci in cols])
+    fit = [sum(c * col[k] for c, col in zip(coef, cols)) for k in range(n)]
+    r = math.sqrt(sum((p - q) ** 2 for p, q in zip(fit, y)) / n)
     if best is None or r < best[0]:
-        best = (r, tau, K, c)
+        best = (r, tau, coef[:-1], coef[-1])
 r, tau, K, c = best
-open(out, 'w').write(f"# The best linear model of {path.split('/')[-1]} (scripts: fit_linear.py): first-order G and a linear f\n"
+what = "first-order G and a linear f" if terms == 1 else f"first-order G and an odd polynomial f of {terms} terms"
+open(out, 'w').write(f"# The best {'linear' if terms == 1 else 'Hammerstein'} model of {path.split('/')[-1]} (scripts: fit_linear.py): {what}\n"
                      f"# by least squares; RMS residual {r:.4g} um with an offset of {c:.4g} um.\n"
-                     f"[model]\npoly = [{K:.8g}]\nG_num = [{1/tau:.8g}]\nG_den = [1.0, {1/tau:.8g}]\n")
+                     f"[model]\npoly = [{', '.join(f'{k:.8g}' for k in K)}]\nG_num = [{1/tau:.8g}]\nG_den = [1.0, {1/tau:.8g}]\n")
 print(out, 'rms', r, 'tau', tau, 'K', K, 'c', c)
