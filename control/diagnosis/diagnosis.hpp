@@ -28,7 +28,7 @@ struct DiagnosisOptions {
   int max_undeclared_delay_samples = 2;  ///< an undeclared I/O delay is searched over 0..this (hold conventions)
   double gain_tolerance = 0.25;       ///< nominal refit: overall gain within [1/(1+tol), 1+tol]
   double time_scale_tolerance = 0.25; ///< nominal refit: G's time constants scaled within [1/(1+tol), 1+tol]
-  double poly_shape_tolerance = 0.25; ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
+  double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
   double poly_next_tolerance = 0.5;   ///< nominal refit: f gains one odd term of the next order whose slope at the
                                       ///< largest recorded |u| is within +- tol of f's mean slope f(u)/u there
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)

@@ -290,14 +290,14 @@ TEST(Diagnose, ANominalFOfTooLowAnOrderIsNoneNotAnEffect) {
   // are explained without naming an effect.
   const HammersteinModel truth = paper_model(3);
   Series s = recording({}, 0.0, 7, 20.0);
-  for (double& u : s.u_V) u = 200.0 + 0.6 * (u - 350.0);  // 75..325 V
+  for (double& u : s.u_V) u = 175.0 + 0.5 * (u - 350.0);  // 70..280 V
   AugmentedPlant plant(truth, 1, Ts, Effect{});
   s.y_um = plant.simulate(s.u_V, s.u_V[0]);
   std::mt19937_64 rng(8);
   std::normal_distribution<double> N(0.0, 0.05);
   for (double& y : s.y_um) y += N(rng);
   double m11 = 0, m13 = 0, m33 = 0, r1 = 0, r3 = 0;  // normal equations of f ~ a x + b x^3
-  for (double x = 0.0; x <= 325.0; x += 1.0) {  // up to the largest recorded voltage
+  for (double x = 0.0; x <= 280.0; x += 1.0) {  // up to the largest recorded voltage
     const double f = truth.f(x), x3 = x * x * x;
     m11 += x * x, m13 += x * x3, m33 += x3 * x3, r1 += x * f, r3 += x3 * f;
   }
