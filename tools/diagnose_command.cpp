@@ -195,6 +195,7 @@ LoadedModel load_model(const std::string& path) {
     m.io_delay_samples = static_cast<int>(*v);
     m.io_delay_declared = true;
   }
+  if (const auto v = root["controller"]["voltage_max_V"].value<double>()) m.voltage_max_V = *v;
   toml::table others;
   for (const auto& [k, v] : root)
     if (k.str() != "model" && k.str() != "sim") others.insert(k, v);
@@ -381,6 +382,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   DiagnosisOptions opt;
   opt.io_delay_samples = lm.io_delay_samples;
   opt.io_delay_declared = lm.io_delay_declared;
+  opt.f_increasing_up_to_V = lm.voltage_max_V;  // the augmented model's f must be increasing over the file's controller range
   DiagnoseOutcome out;
   try {
     out.result = diagnose(lm.model, data, opt);

@@ -174,7 +174,7 @@ struct Prediction {
 class Problem {
  public:
   Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
-          double gain_tolerance)
+          double gain_tolerance, double f_increasing_up_to_V)
       : model_(m), data_(d), held_out_(held_out), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
@@ -186,6 +186,7 @@ class Problem {
     initial_V_.assign(d.size(), NAN);
     for (const auto& s : d)
       for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
+    u_keep_ = std::max(2.0 * u_ref_, f_increasing_up_to_V);
   }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
@@ -195,7 +196,7 @@ class Problem {
   /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
   std::vector<std::vector<double>> raw(std::span<const Effect> e, Nominal k, bool all) {
     ++simulations_;
-    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape, next_coefficient(k.next));
+    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape, next_coefficient(k.next, k.shape));
     std::vector<std::vector<double>> out;
     for (size_t r = 0; r < data_.size(); ++r) {
       const auto& s = data_[r];
@@ -228,10 +229,19 @@ class Problem {
   [[nodiscard]] int simulations() const { return simulations_; }
   /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
   /// as a share of f's mean slope there: c (2n+1) u^(2n) = slope_share f(u) / u.
-  [[nodiscard]] double next_coefficient(double slope_share) const {
+  /// A negative term is limited so that f (with `shape`) stays increasing up to the controller's range (at
+  /// least twice the largest recorded |u|): the augmented model must run in that controller.
+  [[nodiscard]] double next_coefficient(double slope_share, double shape = 1.0) const {
     const int n = model_.f.terms();
     if (slope_share == 0.0 || n >= OddPolynomial::kMaxTerms) return 0.0;
-    return slope_share * model_.f(u_ref_) / u_ref_ / ((2.0 * n + 1.0) * std::pow(u_ref_, 2.0 * n));
+    const double unit = model_.f(u_ref_) / u_ref_ / ((2.0 * n + 1.0) * std::pow(u_ref_, 2.0 * n));
+    const auto turns = [&](double share) {
+      return refit_model(model_, 1.0, shape, share * unit).f.first_turnover(u_keep_).has_value();
+    };
+    if (slope_share > 0.0 || !turns(slope_share)) return slope_share * unit;
+    double ok = 0.0, bad = slope_share;  // bisection on the share: `ok` keeps f increasing
+    for (int i = 0; i < 30; ++i) (turns(0.5 * (ok + bad)) ? bad : ok) = 0.5 * (ok + bad);
+    return ok * unit;
   }
 
  private:
@@ -245,6 +255,7 @@ class Problem {
   std::vector<double> initial_V_;
   double io_ = 1.0;
   double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
+  double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
   double gain_lo_, gain_hi_;
   size_t n_fit_ = 0;
   int simulations_ = 0;
@@ -1019,7 +1030,10 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level);  // effect 1's
     const double with_both = excess(pair.errors);
     const double c0 = t0.mean_um2, c1 = t1.mean_um2;
-    pair_ok = with_both <= o.explained_excess * base && t0.significant && t1.significant && std::min(c0, c1) > 0.05 * s2;
+    // And material: each removes at least half of what the other leaves alone, and 5% of the noise variance.
+    const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : base; };
+    const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) && std::min(c0, c1) > 0.05 * s2;
+    pair_ok = with_both <= o.explained_excess * base && t0.significant && t1.significant && material;
     if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
     if (pair_ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   }
@@ -1071,7 +1085,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.nominal_refit.time_scale = k.time_scale;
   res.nominal_refit.poly_shape = k.shape;
   res.nominal_refit.poly_next_slope = k.next;
-  res.nominal_refit.poly_next = problem.next_coefficient(k.next);
+  res.nominal_refit.poly_next = problem.next_coefficient(k.next, k.shape);
   res.alignment.offset_um = pc.offset_um;
   std::string text = lead + "Best explanation: " + best.explanation;
   if (pair_ok)
@@ -1140,7 +1154,7 @@ Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vec
                           Nominal& k) {
   k = refit_nominal(problem, o);
   auto refit = problem.predict({}, k, true);
-  res.nominal_refit = {refit.gain, k.time_scale, k.shape, k.next, problem.next_coefficient(k.next),
+  res.nominal_refit = {refit.gain, k.time_scale, k.shape, k.next, problem.next_coefficient(k.next, k.shape),
                        errors_of(data, refit.y, res.held_out)};
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
@@ -1183,7 +1197,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   check_inputs(model, data);
   DiagnosisResult res;
   for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-  Problem problem(model, data, res.held_out, o.gain_tolerance);
+  Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V);
   const DataScale scale = align_and_baseline(res, problem, data, o);
   Nominal k;
   auto refit = refit_and_test(res, problem, data, o, k);

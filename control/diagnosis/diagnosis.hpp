@@ -31,7 +31,10 @@ struct DiagnosisOptions {
   double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
   double poly_next_tolerance = 0.5;   ///< nominal refit: f gains one odd term of the next order whose slope at the
                                       ///< largest recorded |u| is within +- tol of f's mean slope f(u)/u there
+  double f_increasing_up_to_V = 0.0;  ///< a negative added f term keeps f increasing up to this voltage (the
+                                      ///< controller's range; at least twice the largest recorded |u|)
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
+  double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
   double validation_fraction = 0.3;   ///< share of every block held out (its end)
