@@ -879,8 +879,10 @@ std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& prob
 std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                    const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  auto out = second_effect_starts(a, problem, data, scale, o, kPairsTried);
-  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < 2; ++i) {
+  // The fitted runners-up first (the old selection); the forward selection only with o.forward_pairs.
+  std::vector<Effect> out;
+  if (o.forward_pairs) out = second_effect_starts(a, problem, data, scale, o, kPairsTried);
+  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < 3; ++i) {
     const Effect& b = res.candidates[i].effect;
     const std::vector<Effect> both{a.effect, b};
     try {

@@ -34,6 +34,7 @@ struct DiagnosisOptions {
   double f_increasing_up_to_V = 0.0;  ///< a negative added f term keeps f increasing up to this voltage (the
                                       ///< controller's range; at least twice the largest recorded |u|)
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
+  bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
