@@ -195,6 +195,7 @@ LoadedModel load_model(const std::string& path) {
     m.io_delay_samples = static_cast<int>(*v);
     m.io_delay_declared = true;
   }
+  if (const auto v = root["controller"]["voltage_max_V"].value<double>()) m.voltage_max_V = *v;
   toml::table others;
   for (const auto& [k, v] : root)
     if (k.str() != "model" && k.str() != "sim") others.insert(k, v);
@@ -243,13 +244,15 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
   const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
   // The effects' parameters were fitted jointly with this refit: they describe the rig only together with it.
-  auto refit = refit_model(lm.model, nr.time_scale, nr.poly_shape);
+  auto refit = refit_model(lm.model, nr.time_scale, nr.poly_shape, nr.poly_next);
   std::vector<double> poly = refit.f.coefficients();
   for (double& c : poly) c *= nr.gain;
   refit.f = control::OddPolynomial(poly);
   s << "#\n# [model] is what the controller uses: the model file's nominal model with the refit the diagnosis made\n"
     << "# (overall gain x " << number_or_null(nr.gain, "%.4g") << ", G's time constants x " << number_or_null(nr.time_scale, "%.4g")
-    << ", f's nonlinear coefficients x " << number_or_null(nr.poly_shape, "%.4g") << "; "
+    << ", f's nonlinear coefficients x " << number_or_null(nr.poly_shape, "%.4g")
+    << (nr.poly_next != 0.0 ? ", plus the next odd term (coefficient " + number_or_null(nr.poly_next, "%.4g") + ")" : std::string())
+    << "; "
     << (r.mixture.empty() ? "the nuisance-only refit, no effect named" : "fitted jointly with the effects below") << ")\n"
     << "# and [[model.effect]], the diagnosed effects, dominant first: a controller in a mode that uses f^-1\n"
     << "# compensates them. The effects' parameters hold only together with this refit, so both go together.\n"
@@ -311,7 +314,8 @@ std::string extension_json(const DiagnosisResult& r) {
   j << "  \"baseline_aligned\": {\"rmse_um\": " << number_or_null(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.aligned.rmse_fit_um)
     << ", \"rmse_validation_um\": " << number_or_null(r.aligned.rmse_validation_um) << "},\n";
   j << "  \"nominal_refit\": {\"gain\": " << number_or_null(n.gain) << ", \"time_scale\": " << number_or_null(n.time_scale)
-    << ", \"poly_shape\": " << number_or_null(n.poly_shape)
+    << ", \"poly_shape\": " << number_or_null(n.poly_shape) << ", \"poly_next\": " << number_or_null(n.poly_next)
+    << ", \"poly_next_slope\": " << number_or_null(n.poly_next_slope)
     << ", \"rmse_um\": " << number_or_null(n.errors.rmse_um) << ", \"rmse_validation_um\": " << number_or_null(n.errors.rmse_validation_um) << "},\n";
   const auto& t = r.none_test;
   j << "  \"none_test\": {\"false_alarm_rate\": " << number_or_null(t.false_alarm_rate) << ", \"windows\": " << t.windows
@@ -378,6 +382,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   DiagnosisOptions opt;
   opt.io_delay_samples = lm.io_delay_samples;
   opt.io_delay_declared = lm.io_delay_declared;
+  opt.f_increasing_up_to_V = lm.voltage_max_V;  // the augmented model's f must be increasing over the file's controller range
   DiagnoseOutcome out;
   try {
     out.result = diagnose(lm.model, data, opt);
@@ -397,7 +402,8 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     << number_or_null(r.alignment.used_samples, "%.3g") << " used; sensor offset " << number_or_null(r.alignment.offset_um.front(), "%.4g") << " um"
     << (r.alignment.note.empty() ? "" : "\n  NOTE: " + r.alignment.note) << "\n";
   s << "nominal refit (nuisance only): gain " << number_or_null(r.nominal_refit.gain, "%.4g") << ", G time scale "
-    << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f shape " << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ", held-out " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+    << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f shape " << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ", f next-term slope share "
+    << number_or_null(r.nominal_refit.poly_next_slope, "%.3g") << ", held-out " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";

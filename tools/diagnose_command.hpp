@@ -29,6 +29,8 @@ struct LoadedModel {
   control::HammersteinModel model = control::paper_model(2);  ///< replaced by the file's
   int io_delay_samples = 1;
   bool io_delay_declared = false;  ///< the file has `[model] io_delay_samples` (else it is estimated)
+  double voltage_max_V = 0.0;      ///< `[controller] voltage_max_V` (0: absent; the augmented model then sets
+                                   ///< the controller's limit below a turnover of f itself)
   std::string other_tables;        ///< the file's tables other than [model] and [sim], as TOML (kept in the augmented model)
 };
 

@@ -34,12 +34,14 @@ struct SquaredError {
 };
 
 /// The bounded refit of the nominal model that is fitted as a nonlinear nuisance:
-/// G's time constants scaled by time_scale, f's coefficients above the linear one by shape.
+/// G's time constants scaled by time_scale, f's coefficients above the linear one by shape,
+/// and one odd term of the next order added to f (`next`: its slope at the largest recorded |u| over
+/// f's mean slope f(u)/u there).
 struct Nominal {
-  Nominal(double ts = 1.0, double sh = 1.0) : time_scale(ts), shape(sh) {}  // NOLINT: a bare time scale converts
-  double time_scale, shape;
-  [[nodiscard]] bool identity() const { return time_scale == 1.0 && shape == 1.0; }
+  Nominal(double ts = 1.0, double sh = 1.0, double nx = 0.0) : time_scale(ts), shape(sh), next(nx) {}  // NOLINT: a bare time scale converts
+  double time_scale, shape, next;
 };
+constexpr Eigen::Index kNominalParams = 3;
 
 /// Internal (fit) coordinates of a joint fit: the effects' parameters, then
 /// (optionally) G's time scale; log for scale parameters, range-normalised otherwise.
@@ -47,7 +49,7 @@ struct FitSpace {
   std::vector<EffectKind> kinds;
   std::vector<ParameterSpec> specs;
   std::vector<size_t> first;  ///< index of each kind's first parameter in specs
-  bool time_scale = false;    ///< the last two specs are the nominal refit (G's time scale, f's shape)
+  bool time_scale = false;    ///< the last three specs are the nominal refit (G's time scale, f's shape, f's next term)
 
   FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
            const std::vector<Series>* data = nullptr);
@@ -62,7 +64,7 @@ struct FitSpace {
     return std::clamp(p, specs[i].lower, specs[i].upper);
   }
   [[nodiscard]] size_t end_of(size_t e) const {
-    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? 2 : 0);
+    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? kNominalParams : 0);
   }
   [[nodiscard]] std::vector<Effect> effects(const Eigen::VectorXd& z) const {
     std::vector<Effect> out;
@@ -75,7 +77,8 @@ struct FitSpace {
   }
   [[nodiscard]] Nominal g_scale(const Eigen::VectorXd& z) const {
     if (!time_scale) return {};
-    return {to_p(specs.size() - 2, z(z.size() - 2)), to_p(specs.size() - 1, z(z.size() - 1))};
+    const size_t n = specs.size();
+    return {to_p(n - 3, z(z.size() - 3)), to_p(n - 2, z(z.size() - 2)), to_p(n - 1, z(z.size() - 1))};
   }
   /// z of given effects (kinds in this order) and time scale.
   [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
@@ -84,8 +87,10 @@ struct FitSpace {
       for (size_t i = first[n]; i < end_of(n); ++i)
         z(static_cast<Eigen::Index>(i)) = to_z(i, std::clamp(e[n].p[i - first[n]], specs[i].lower, specs[i].upper));
     if (time_scale) {
-      z(z.size() - 2) = to_z(specs.size() - 2, k.time_scale);
-      z(z.size() - 1) = to_z(specs.size() - 1, k.shape);
+      const size_t n = specs.size();
+      z(z.size() - 3) = to_z(n - 3, k.time_scale);
+      z(z.size() - 2) = to_z(n - 2, k.shape);
+      z(z.size() - 1) = to_z(n - 1, k.next);
     }
     return z;
   }
@@ -130,6 +135,11 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     specs.push_back({"time_scale", loop ? std::min(o.hysteresis_time_scale_min, 1.0 / (1.0 + t)) : 1.0 / (1.0 + t), 1.0 + t,
                      true, {1.0}});
     specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
+    // The next odd term, as its slope at the largest recorded |u| over f's mean slope f(u)/u there:
+    // bounded (0.5) so the refitted f stays increasing wherever f's own slope there is at least half its
+    // mean slope (any linear or convex f).
+    const double nx = o.poly_next_tolerance;
+    specs.push_back({"poly_next", -nx, nx, false, {0.0}});
   }
 }
 
@@ -168,7 +178,7 @@ struct Prediction {
 class Problem {
  public:
   Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
-          double gain_tolerance)
+          double gain_tolerance, double f_increasing_up_to_V)
       : model_(m), data_(d), held_out_(held_out), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
@@ -178,6 +188,9 @@ class Problem {
       end_.push_back(last);
     }
     initial_V_.assign(d.size(), NAN);
+    for (const auto& s : d)
+      for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
+    u_keep_ = std::max(2.0 * u_ref_, f_increasing_up_to_V);
   }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
@@ -187,7 +200,7 @@ class Problem {
   /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
   std::vector<std::vector<double>> raw(std::span<const Effect> e, Nominal k, bool all) {
     ++simulations_;
-    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape);
+    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape, next_coefficient(k.next, k.shape));
     std::vector<std::vector<double>> out;
     for (size_t r = 0; r < data_.size(); ++r) {
       const auto& s = data_[r];
@@ -218,6 +231,22 @@ class Problem {
     return out;
   }
   [[nodiscard]] int simulations() const { return simulations_; }
+  /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
+  /// as a share of f's mean slope there: c (2n+1) u^(2n) = slope_share f(u) / u.
+  /// A negative term is limited so that f (with `shape`) stays increasing up to the controller's range (at
+  /// least twice the largest recorded |u|): the augmented model must run in that controller.
+  [[nodiscard]] double next_coefficient(double slope_share, double shape = 1.0) const {
+    const int n = model_.f.terms();
+    if (slope_share == 0.0 || n >= OddPolynomial::kMaxTerms) return 0.0;
+    const double unit = model_.f(u_ref_) / u_ref_ / ((2.0 * n + 1.0) * std::pow(u_ref_, 2.0 * n));
+    const auto turns = [&](double share) {
+      return refit_model(model_, 1.0, shape, share * unit).f.first_turnover(u_keep_).has_value();
+    };
+    if (slope_share > 0.0 || !turns(slope_share)) return slope_share * unit;
+    double ok = 0.0, bad = slope_share;  // bisection on the share: `ok` keeps f increasing
+    for (int i = 0; i < 30; ++i) (turns(0.5 * (ok + bad)) ? bad : ok) = 0.5 * (ok + bad);
+    return ok * unit;
+  }
 
  private:
   /// Free response of G (time-scaled by k) from each unit state, per recording.
@@ -229,6 +258,8 @@ class Problem {
   std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
   std::vector<double> initial_V_;
   double io_ = 1.0;
+  double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
+  double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
   double gain_lo_, gain_hi_;
   size_t n_fit_ = 0;
   int simulations_ = 0;
@@ -479,12 +510,13 @@ std::vector<std::vector<double>> simulate(const HammersteinModel& model, const E
   return out;
 }
 
-HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape) {
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape, double poly_next) {
   HammersteinModel m = model;
   if (time_scale != 1.0) m.G = time_scaled(model.G, time_scale);
-  if (poly_shape != 1.0) {
+  if (poly_shape != 1.0 || poly_next != 0.0) {
     auto c = model.f.coefficients();
     for (size_t i = 1; i < c.size(); ++i) c[i] *= poly_shape;
+    if (poly_next != 0.0 && c.size() < static_cast<size_t>(OddPolynomial::kMaxTerms)) c.push_back(poly_next);
     m.f = OddPolynomial(c);
   }
   return m;
@@ -723,6 +755,26 @@ void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma,
   }
 }
 
+/// Every point of a candidate's coarse grid (the product of its parameters' starts), scored by
+/// `cost(effect)`, best first.
+template <class Cost>
+std::vector<std::pair<double, Eigen::VectorXd>> coarse_grid(const FitSpace& space, Cost cost) {
+  std::vector<std::pair<double, Eigen::VectorXd>> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(space.specs.size()))}};
+  for (size_t i = 0; i < space.specs.size(); ++i) {
+    std::vector<std::pair<double, Eigen::VectorXd>> next;
+    for (const auto& g : grid)
+      for (double v : space.specs[i].starts) {
+        auto s = g;
+        s.second(static_cast<Eigen::Index>(i)) = space.to_z(i, std::clamp(v, space.specs[i].lower, space.specs[i].upper));
+        next.push_back(s);
+      }
+    grid = std::move(next);
+  }
+  for (auto& g : grid) g.first = cost(space.effects(g.second).front());
+  std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return grid;
+}
+
 /// Coarse grid (the evidence) for every candidate, then joint least squares
 /// (effect parameters and G's time scale; gain, offset and initial state by
 /// projection) from the two best grid points of the leading candidates.
@@ -731,29 +783,16 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::vector<std::vector<Eigen::VectorXd>> starts;
   for (EffectKind kind : kCandidateEffects) {
     FitSpace space({kind}, scale, false, o, &data);
-    std::vector<std::pair<double, Eigen::VectorXd>> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(space.specs.size()))}};
-    for (size_t i = 0; i < space.specs.size(); ++i) {
-      std::vector<std::pair<double, Eigen::VectorXd>> next;
-      for (const auto& g : grid)
-        for (double v : space.specs[i].starts) {
-          auto s = g;
-          s.second(static_cast<Eigen::Index>(i)) = space.to_z(i, std::clamp(v, space.specs[i].lower, space.specs[i].upper));
-          next.push_back(s);
-        }
-      grid = std::move(next);
-    }
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
     // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
     std::vector<Eigen::VectorXd> best;  // each with its time-scale start appended
-    double best_cost = INFINITY;
     for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {
-      for (auto& g : grid) g.first = problem.residual(space.effects(g.second), ts).squaredNorm();
-      std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      const auto grid = coarse_grid(space, [&](const Effect& e) { return problem.residual({&e, 1}, ts).squaredNorm(); });
       if (ts == 1.0) {  // the evidence: at the nominal's time scale, as for every candidate
-        best_cost = grid.front().first;
         CandidateResult c;
-        c.effect = space.effects(grid.front().second).front();
         c.specs = space.specs;
+        c.evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
+        c.effect = space.effects(grid.front().second).front();
         res.candidates.push_back(c);
       }
       for (size_t i = 0; i < std::min<size_t>(grid.size(), 2); ++i) {
@@ -761,7 +800,6 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
         best.back() << grid[i].second, ts;
       }
     }
-    res.candidates.back().evidence_r2 = std::max(0.0, 1.0 - best_cost / nuisance_cost);
     starts.push_back(best);
   }
   std::vector<size_t> order(res.candidates.size());
@@ -786,7 +824,8 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
       for (const auto& s0 : starts[order[rank]]) {
         Eigen::VectorXd z(static_cast<Eigen::Index>(spaces[v].specs.size()));
         z.head(s0.size() - 1) = s0.head(s0.size() - 1);
-        z.tail(2) = spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(2);
+        z.tail(kNominalParams) =
+            spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
         double cost = 0.0;
         z = levenberg_marquardt(problem, spaces[v], z, cost);
         if (cost < best[v]) {
@@ -794,13 +833,14 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
           fits[v].effect = spaces[v].effects(z).front();
           fits[v].time_scale = spaces[v].g_scale(z).time_scale;
           fits[v].poly_shape = spaces[v].g_scale(z).shape;
+          fits[v].poly_next = spaces[v].g_scale(z).next;
         }
       }
     }
     c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
     c.fitted = true;
     const std::vector<Effect> e{c.effect};
-    const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape), true);
+    const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape, c.poly_next), true);
     c.gain = pred.gain;
     c.errors = errors_of(data, pred.y, res.held_out);
     c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
@@ -825,42 +865,132 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
 struct PairFit {
   std::vector<Effect> effects;
   Nominal nominal;
+  std::vector<std::vector<double>> y;  ///< its prediction, all samples
   double gain = 1.0;
   ModelErrors errors;
   double score = INFINITY;
 };
 
-/// Fits the best single effect jointly with each of the next three fitted candidates.
+constexpr size_t kPairsTried = 3;  ///< second effects from the forward selection fitted jointly with the leader
+
+/// The second effects worth fitting with the leader `a`: every other candidate's coarse grid scored with `a`
+/// fixed at its fit (the evidence for a second effect in what `a` leaves, not what explains the same
+/// mismatch as `a`), the best grid point of the `count` best kinds.
+std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& problem, const std::vector<Series>& data,
+                                         const DataScale& scale, const DiagnosisOptions& o, size_t count) {
+  std::vector<std::pair<double, Effect>> ranked;
+  const Nominal k(a.time_scale, a.poly_shape, a.poly_next);
+  for (EffectKind kind : kCandidateEffects) {
+    const std::vector<Effect> kinds{a.effect, Effect{kind, {}}};
+    try {
+      validate_mixture(kinds, "mixture");
+    } catch (const ConfigError&) {
+      continue;  // the same kind twice, or two time-scale effects
+    }
+    FitSpace space({kind}, scale, false, o, &data);
+    const auto grid = coarse_grid(space, [&](const Effect& b) {
+      const std::vector<Effect> e{a.effect, b};
+      return problem.residual(e, k).squaredNorm();
+    });
+    ranked.emplace_back(grid.front().first, space.effects(grid.front().second).front());
+  }
+  std::sort(ranked.begin(), ranked.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+  std::vector<Effect> out;
+  for (size_t i = 0; i < std::min(count, ranked.size()); ++i) out.push_back(ranked[i].second);
+  return out;
+}
+
+/// The starts of the second effect: the forward selection's best, then the two best fitted single
+/// runners-up (a second effect large enough to nearly lead alone, which the leader's fit may have
+/// partly absorbed, so its evidence in the leader's residual is weak) when not already among them.
+std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                                   const DataScale& scale, const DiagnosisOptions& o) {
+  const auto& a = res.candidates.front();
+  // The fitted runners-up first (the old selection); the forward selection only with o.forward_pairs.
+  std::vector<Effect> out;
+  if (o.forward_pairs) out = second_effect_starts(a, problem, data, scale, o, kPairsTried);
+  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < 3; ++i) {
+    const Effect& b = res.candidates[i].effect;
+    const std::vector<Effect> both{a.effect, b};
+    try {
+      validate_mixture(both, "mixture");
+    } catch (const ConfigError&) {
+      continue;
+    }
+    if (std::none_of(out.begin(), out.end(), [&](const Effect& e) { return e.kind == b.kind; })) out.push_back(b);
+    ++added;
+  }
+  return out;
+}
+
+/// Fits the best single effect jointly with each of the most promising second effects.
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o) {
   PairFit best;
   const auto& a = res.candidates.front();
-  int tried = 0;
-  for (size_t i = 1; i < res.candidates.size() && tried < 3; ++i) {
-    const auto& b = res.candidates[i];
-    if (!b.fitted) break;
-    const std::vector<Effect> start{a.effect, b.effect};
-    try {
-      validate_mixture(start, "mixture");
-    } catch (const ConfigError&) {
-      continue;  // two time-scale effects cannot run together
-    }
-    ++tried;
-    FitSpace space({a.effect.kind, b.effect.kind}, scale, true, o, &data);
+  for (const Effect& b : second_effects(res, problem, data, scale, o)) {
+    const std::vector<Effect> start{a.effect, b};
+    FitSpace space({a.effect.kind, b.kind}, scale, true, o, &data);
     double cost = 0.0;
-    const auto z = levenberg_marquardt(problem, space, space.z_of(start, Nominal(a.time_scale, a.poly_shape)), cost);
+    const auto z = levenberg_marquardt(problem, space, space.z_of(start, Nominal(a.time_scale, a.poly_shape, a.poly_next)), cost);
     PairFit p;
     p.effects = space.effects(z);
     p.nominal = space.g_scale(z);
-    const auto pred = problem.predict(p.effects, p.nominal, true);
+    auto pred = problem.predict(p.effects, p.nominal, true);
     p.gain = pred.gain;
     p.errors = errors_of(data, pred.y, res.held_out);
+    p.y = std::move(pred.y);
     p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
               (1.0 + o.penalty_per_parameter * static_cast<double>(space.specs.size() - 1));
-    if (p.score < best.score) best = p;
+    if (p.score < best.score) best = std::move(p);
   }
   return best;
 }
+
+/// Student t upper quantile at tail p with `df` degrees of freedom (Cornish-Fisher, first two terms).
+double t_upper_quantile(double p, double df) {
+  const double z = normal_upper_quantile(p);
+  return z + (z * z * z + z) / (4.0 * df) + (5.0 * std::pow(z, 5) + 16.0 * z * z * z + 3.0 * z) / (96.0 * df * df);
+}
+
+}  // namespace
+
+HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
+                                 const std::vector<std::vector<double>>& y_b, const std::vector<std::vector<char>>& held_out,
+                                 double block_s, double level) {
+  // Blocks of contiguous held-out samples: a model error is correlated in time, so single samples would
+  // overstate the evidence; blocks of the localisation window are nearly independent for the dynamics here.
+  std::vector<double> means;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const size_t len = std::max<size_t>(10, static_cast<size_t>(std::lround(block_s / data[r].sample_time_s)));
+    double sum = 0.0;
+    size_t n = 0;
+    for (size_t k = 0; k <= data[r].y_um.size(); ++k) {
+      const bool in = k < data[r].y_um.size() && held_out[r][k];
+      if (in) {
+        const double ea = data[r].y_um[k] - y_a[r][k], eb = data[r].y_um[k] - y_b[r][k];
+        sum += ea * ea - eb * eb;
+        ++n;
+      }
+      if (n > 0 && (n == len || (!in && n >= len / 2))) means.push_back(sum / static_cast<double>(n));
+      if (n == len || !in) sum = 0.0, n = 0;
+    }
+  }
+  HeldOutTest t;
+  t.blocks = static_cast<int>(means.size());
+  if (means.size() < 3) return t;
+  const double nb = static_cast<double>(means.size());
+  t.mean_um2 = std::accumulate(means.begin(), means.end(), 0.0) / nb;
+  double var = 0.0;
+  for (double m : means) var += (m - t.mean_um2) * (m - t.mean_um2);
+  const double se = std::sqrt(var / (nb - 1.0) / nb);
+  t.t = se > 0.0 ? t.mean_um2 / se : (t.mean_um2 > 0.0 ? INFINITY : 0.0);
+  t.threshold = t_upper_quantile(level, nb - 1.0);
+  t.significant = t.t > t.threshold;
+  return t;
+}
+
+namespace {
 
 bool rate_independent(EffectKind k) {
   return k == EffectKind::hysteresis || k == EffectKind::dead_zone || k == EffectKind::saturation;
@@ -895,6 +1025,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
             const DiagnosisOptions& o) {
   const double s2 = res.noise_sigma_um * res.noise_sigma_um;
   const auto& nuis = res.nominal_refit.errors;
+  const Nominal nuis_k(res.nominal_refit.time_scale, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope);
   // Judge on the held-out data when the mismatch reaches it; otherwise on the fit segment.
   const bool judge_val = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
   const auto excess = [&](const ModelErrors& e) {
@@ -908,17 +1039,30 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   if (best.fitted && base > 0.0) pair = best_pair(res, problem, data, scale, o);
   bool pair_ok = false;
   if (std::isfinite(pair.score)) {
-    // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair.
-    const auto alone = [&](EffectKind k) {
+    // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair. Both
+    // must be significant: the pair predicts the held-out data better than either effect alone (a
+    // one-sided test at the false-alarm rate, Bonferroni over the two effects).
+    const auto alone = [&](EffectKind k) -> const CandidateResult* {
       for (const auto& c : res.candidates)
-        if (c.fitted && c.effect.kind == k) return excess(c.errors);
-      return base;
+        if (c.fitted && c.effect.kind == k) return &c;
+      return nullptr;
     };
+    const auto alone_y = [&](const CandidateResult* c) {
+      if (!c) return problem.predict({}, nuis_k, true).y;
+      const std::vector<Effect> e{c->effect};
+      return problem.predict(e, Nominal(c->time_scale, c->poly_shape, c->poly_next), true).y;
+    };
+    const auto* a0 = alone(pair.effects[0].kind);
+    const auto* a1 = alone(pair.effects[1].kind);
+    const double level = o.false_alarm_rate / 2.0;
+    const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level);  // effect 0's
+    const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level);  // effect 1's
     const double with_both = excess(pair.errors);
-    const double c0 = alone(pair.effects[1].kind) - with_both, c1 = alone(pair.effects[0].kind) - with_both;
-    const double second = std::min(c0, c1);
-    pair_ok = with_both <= o.explained_excess * base && second > 0.05 * s2 &&
-              with_both <= o.mixture_gain * std::min(alone(pair.effects[0].kind), alone(pair.effects[1].kind));
+    const double c0 = t0.mean_um2, c1 = t1.mean_um2;
+    // And material: each removes at least half of what the other leaves alone, and 5% of the noise variance.
+    const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : base; };
+    const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) && std::min(c0, c1) > 0.05 * s2;
+    pair_ok = with_both <= o.explained_excess * base && t0.significant && t1.significant && material;
     if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
     if (pair_ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   }
@@ -930,7 +1074,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     res.fitted = pair.errors;
   } else if (single_ok) {
     chosen = {best.effect};
-    k = Nominal(best.time_scale, best.poly_shape);
+    k = Nominal(best.time_scale, best.poly_shape, best.poly_next);
     res.fitted = best.errors;
     res.contribution = {base - excess(best.errors)};
     // Equally good single explanations are an answer, not a coin toss.
@@ -969,6 +1113,8 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.nominal_refit.gain = pc.gain;
   res.nominal_refit.time_scale = k.time_scale;
   res.nominal_refit.poly_shape = k.shape;
+  res.nominal_refit.poly_next_slope = k.next;
+  res.nominal_refit.poly_next = problem.next_coefficient(k.next, k.shape);
   res.alignment.offset_um = pc.offset_um;
   std::string text = lead + "Best explanation: " + best.explanation;
   if (pair_ok)
@@ -1037,7 +1183,8 @@ Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vec
                           Nominal& k) {
   k = refit_nominal(problem, o);
   auto refit = problem.predict({}, k, true);
-  res.nominal_refit = {refit.gain, k.time_scale, k.shape, errors_of(data, refit.y, res.held_out)};
+  res.nominal_refit = {refit.gain, k.time_scale, k.shape, k.next, problem.next_coefficient(k.next, k.shape),
+                       errors_of(data, refit.y, res.held_out)};
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
@@ -1079,7 +1226,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   check_inputs(model, data);
   DiagnosisResult res;
   for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-  Problem problem(model, data, res.held_out, o.gain_tolerance);
+  Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V);
   const DataScale scale = align_and_baseline(res, problem, data, o);
   Nominal k;
   auto refit = refit_and_test(res, problem, data, o, k);

@@ -35,7 +35,12 @@ struct DiagnosisOptions {
   /// with the earlier shape (spread 0) by this share; below it the two-parameter loop is reported.
   double hysteresis_shape_min_gain = 0.25;
   double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
+  double poly_next_tolerance = 0.5;   ///< nominal refit: f gains one odd term of the next order whose slope at the
+                                      ///< largest recorded |u| is within +- tol of f's mean slope f(u)/u there
+  double f_increasing_up_to_V = 0.0;  ///< a negative added f term keeps f increasing up to this voltage (the
+                                      ///< controller's range; at least twice the largest recorded |u|)
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
+  bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
@@ -43,6 +48,7 @@ struct DiagnosisOptions {
   double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block (the whole
                                       ///< recording as one block when shorter than two blocks)
   double window_s = 1.0;              ///< localisation window
+  double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
   double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per fitted parameter
@@ -75,6 +81,7 @@ struct CandidateResult {
   ModelErrors errors;
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
+  double poly_next = 0.0;  ///< f's added term, as its slope share (see DiagnosisOptions::poly_next_tolerance)
   int simulations = 0;
   std::string explanation;
 };
@@ -94,6 +101,8 @@ struct Alignment {
 /// (what the augmented model runs); `errors` are always those of the nuisance-only refit.
 struct NominalRefit {
   double gain = 1.0, time_scale = 1.0, poly_shape = 1.0;
+  double poly_next_slope = 0.0;  ///< f's added odd term: its slope at the largest |u| over f's mean slope there
+  double poly_next = 0.0;        ///< its coefficient (of x^(2n+1), n = the nominal's number of terms)
   ModelErrors errors;
 };
 
@@ -153,12 +162,28 @@ void check_series(const Series& s, const HammersteinModel& model);
 std::vector<std::vector<double>> simulate(const HammersteinModel& model, const Effect& effect,
                                           const std::vector<Series>& data, int io_delay_samples);
 
-/// The model with G's time constants multiplied by `time_scale` and f's
-/// coefficients above the linear one by `poly_shape` (the bounded nominal refit).
-HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape);
+/// The model with G's time constants multiplied by `time_scale`, f's coefficients above the
+/// linear one by `poly_shape`, and f's next odd term with coefficient `poly_next` appended
+/// (the bounded nominal refit).
+HammersteinModel refit_model(const HammersteinModel& model, double time_scale, double poly_shape, double poly_next = 0.0);
 
 /// G with every time constant multiplied by `factor` (G(factor s)): same DC gain.
 TransferFunction time_scaled(const TransferFunction& G, double factor);
+
+/// A one-sided test that model b predicts the held-out data better than model a.
+struct HeldOutTest {
+  double mean_um2 = 0.0;   ///< mean held-out squared-error reduction (a's MSE minus b's)
+  double t = 0.0, threshold = 0.0;
+  int blocks = 0;
+  bool significant = false;
+};
+
+/// Compares two predictions on the held-out samples: the squared-error differences averaged in blocks
+/// of `block_s` seconds (a model error is correlated in time), their mean against its standard error
+/// (Student t, blocks - 1 degrees of freedom) at one-sided level `level`. Fewer than 3 blocks: not significant.
+HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
+                                 const std::vector<std::vector<double>>& y_b, const std::vector<std::vector<char>>& held_out,
+                                 double block_s, double level);
 
 /// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),
 /// ConfigError on a model that cannot be simulated (unstable G, non-monotone f

@@ -106,7 +106,8 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   control::SimulatedRig rig(sim);
   const auto& s = c.recordings[0];
   // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effect.
-  auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape);
+  auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape,
+                           o.result.nominal_refit.poly_next);
   auto poly = truth.f.coefficients();
   for (double& c : poly) c *= o.result.nominal_refit.gain;
   truth.f = control::OddPolynomial(poly);
