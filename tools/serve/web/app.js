@@ -173,10 +173,7 @@ function copyAxis(p) {
     p.axis.style.height = `${h / devicePixelRatio}px`;
     p.axis.style.top = `${src.getBoundingClientRect().top - p.box.getBoundingClientRect().top}px`;
   }
-  const ctx = p.axis.getContext("2d");
-  ctx.fillStyle = "#fff";
-  ctx.fillRect(0, 0, w, h);
-  ctx.drawImage(src, 0, 0, w, h, 0, 0, w, h);
+  p.axis.getContext("2d").drawImage(src, 0, 0, w, h, 0, 0, w, h);   // the source is opaque: every pixel replaced
 }
 
 const plots = [
