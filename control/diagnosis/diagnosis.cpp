@@ -1064,95 +1064,77 @@ std::string separating_experiment(EffectKind a, EffectKind b) {
 
 namespace {
 
-/// Verdict from the fitted candidates, judged against the nuisance-only refit:
-/// a single effect, a mixture of two (both significant on held-out data), or unexplained.
-void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
-            const DiagnosisOptions& o) {
-  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
-  const auto& nuis = res.nominal_refit.errors;
-  const Nominal nuis_k(res.nominal_refit.time_scale, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope);
-  // Judge on the held-out data when the mismatch reaches it; otherwise on the fit segment.
-  const bool judge_val = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
-  const auto excess = [&](const ModelErrors& e) {
-    const double r = judge_val ? e.rmse_validation_um : e.rmse_fit_um;
+/// The yardstick of the verdict: excess (above-noise) MSE, on the held-out data when the mismatch reaches
+/// it, otherwise on the fit segment; `base` is what the nuisance-only refit leaves.
+struct Excess {
+  double s2 = 0.0, base = 0.0;
+  bool on_validation = true;
+  explicit Excess(const DiagnosisResult& res) : s2(res.noise_sigma_um * res.noise_sigma_um) {
+    const auto& nuis = res.nominal_refit.errors;
+    on_validation = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
+    base = (*this)(nuis);
+  }
+  double operator()(const ModelErrors& e) const {
+    const double r = on_validation ? e.rmse_validation_um : e.rmse_fit_um;
     return r * r - s2;
+  }
+};
+
+/// Whether both effects of `pair` are named: each significant on held-out data (the pair predicts the
+/// held-out data better than the other effect alone, a one-sided test at the false-alarm rate, Bonferroni
+/// over the two) and material. Orders the pair dominant first and sets `res.contribution` when it is.
+bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std::vector<Series>& data,
+                const Excess& excess, const DiagnosisOptions& o) {
+  const auto alone = [&](EffectKind k) -> const CandidateResult* {
+    for (const auto& c : res.candidates)
+      if (c.fitted && c.effect.kind == k) return &c;
+    return nullptr;
   };
-  const double base = excess(nuis);
+  const auto alone_y = [&](const CandidateResult* c) {
+    if (!c)
+      return problem.predict({}, Nominal(res.nominal_refit.time_scale, res.nominal_refit.poly_shape,
+                                         res.nominal_refit.poly_next_slope), true).y;
+    const std::vector<Effect> e{c->effect};
+    return problem.predict(e, Nominal(c->time_scale, c->poly_shape, c->poly_next), true).y;
+  };
+  const auto* a0 = alone(pair.effects[0].kind);
+  const auto* a1 = alone(pair.effects[1].kind);
+  const double level = o.false_alarm_rate / 2.0;
+  // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair.
+  const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level);
+  const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level);
+  const double with_both = excess(pair.errors), c0 = t0.mean_um2, c1 = t1.mean_um2;
+  // Material: each removes at least half of what the other leaves alone, and 5% of the noise variance.
+  const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : excess.base; };
+  const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) &&
+                        std::min(c0, c1) > 0.05 * excess.s2;
+  const bool ok = with_both <= o.explained_excess * excess.base && t0.significant && t1.significant && material;
+  if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
+  if (ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
+  return ok;
+}
+
+/// Equally good single explanations are an answer, not a coin toss: the candidates that also explain
+/// the excess and come within the ambiguity margin of the leader, and what would separate them.
+void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisOptions& o) {
   const auto& best = res.candidates.front();
-  const bool single_ok = best.fitted && base > 0.0 && excess(best.errors) <= o.explained_excess * base;
-  PairFit pair;
-  if (best.fitted && base > 0.0) pair = best_pair(res, problem, data, scale, o);
-  bool pair_ok = false;
-  if (std::isfinite(pair.score)) {
-    // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair. Both
-    // must be significant: the pair predicts the held-out data better than either effect alone (a
-    // one-sided test at the false-alarm rate, Bonferroni over the two effects).
-    const auto alone = [&](EffectKind k) -> const CandidateResult* {
-      for (const auto& c : res.candidates)
-        if (c.fitted && c.effect.kind == k) return &c;
-      return nullptr;
-    };
-    const auto alone_y = [&](const CandidateResult* c) {
-      if (!c) return problem.predict({}, nuis_k, true).y;
-      const std::vector<Effect> e{c->effect};
-      return problem.predict(e, Nominal(c->time_scale, c->poly_shape, c->poly_next), true).y;
-    };
-    const auto* a0 = alone(pair.effects[0].kind);
-    const auto* a1 = alone(pair.effects[1].kind);
-    const double level = o.false_alarm_rate / 2.0;
-    const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level);  // effect 0's
-    const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level);  // effect 1's
-    const double with_both = excess(pair.errors);
-    const double c0 = t0.mean_um2, c1 = t1.mean_um2;
-    // And material: each removes at least half of what the other leaves alone, and 5% of the noise variance.
-    const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : base; };
-    const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) && std::min(c0, c1) > 0.05 * s2;
-    pair_ok = with_both <= o.explained_excess * base && t0.significant && t1.significant && material;
-    if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
-    if (pair_ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
+  for (size_t i = 1; i < res.candidates.size(); ++i) {
+    const auto& c = res.candidates[i];
+    if (c.fitted && excess(c.errors) <= o.explained_excess * excess.base &&
+        excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base)
+      res.ambiguous_with.emplace_back(to_string(c.effect.kind));
   }
-  std::vector<Effect> chosen;
-  Nominal k;
-  if (pair_ok) {
-    chosen = pair.effects;
-    k = pair.nominal;
-    res.fitted = pair.errors;
-  } else if (single_ok) {
-    chosen = {best.effect};
-    k = Nominal(best.time_scale, best.poly_shape, best.poly_next);
-    res.fitted = best.errors;
-    res.contribution = {base - excess(best.errors)};
-    // Equally good single explanations are an answer, not a coin toss.
-    for (size_t i = 1; i < res.candidates.size(); ++i) {
-      const auto& c = res.candidates[i];
-      if (c.fitted && excess(c.errors) <= o.explained_excess * base &&
-          excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * base)
-        res.ambiguous_with.emplace_back(to_string(c.effect.kind));
-    }
-    if (!res.ambiguous_with.empty())
-      res.separating_experiment = separating_experiment(best.effect.kind, *parse_effect_kind(res.ambiguous_with.front()));
-  }
-  const std::string noise = fmt("%.3g", res.noise_sigma_um);
-  const std::string runner_up =
-      res.candidates.size() > 1 && res.candidates[1].fitted
-          ? "; next best: " + std::string(to_string(res.candidates[1].effect.kind)) + " (validation RMSE " +
-                fmt("%.3g", res.candidates[1].errors.rmse_validation_um) + " um)"
-          : "";
-  const std::string lead = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) +
-                           " um RMS (nuisance-only refit: " + fmt("%.3g", nuis.rmse_um) + " um) against " + noise +
-                           " um of sensor noise. ";
-  if (chosen.empty()) {
-    res.verdict = "unexplained";
-    res.explanation = lead + "No candidate explains it: the best (" + std::string(to_string(best.effect.kind)) + ") leaves " +
-                      fmt("%.0f", 100.0 * std::max(excess(best.errors), 0.0) / std::max(base, 1e-300)) +
-                      "% of the excess residual variance" + runner_up + ".";
-    return;
-  }
+  if (!res.ambiguous_with.empty())
+    res.separating_experiment = separating_experiment(best.effect.kind, *parse_effect_kind(res.ambiguous_with.front()));
+}
+
+/// The verdict's fields from the chosen effects, and the nominal refit and offset as fitted jointly with
+/// them (what the augmented model runs).
+void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effect>& chosen, Nominal k) {
   res.mixture = chosen;
   res.effect = chosen.front();
   res.chosen = chosen.front().kind;
   res.verdict = std::string(to_string(res.chosen));
-  // The nominal refit and the offset, as fitted jointly with the verdict's effects (what the augmented model runs).
   const auto pc = problem.predict(chosen, k, true);
   res.y_fitted_um = pc.y;
   res.nominal_refit.gain = pc.gain;
@@ -1161,18 +1143,61 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.nominal_refit.poly_next_slope = k.next;
   res.nominal_refit.poly_next = problem.next_coefficient(k.next, k.shape);
   res.alignment.offset_um = pc.offset_um;
+}
+
+/// The summary sentence of the verdict (or of why there is none).
+std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bool pair) {
+  const auto& best = res.candidates.front();
+  const auto& nuis = res.nominal_refit.errors;
+  const std::string runner_up =
+      res.candidates.size() > 1 && res.candidates[1].fitted
+          ? "; next best: " + std::string(to_string(res.candidates[1].effect.kind)) + " (validation RMSE " +
+                fmt("%.3g", res.candidates[1].errors.rmse_validation_um) + " um)"
+          : "";
+  const std::string lead = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) +
+                           " um RMS (nuisance-only refit: " + fmt("%.3g", nuis.rmse_um) + " um) against " +
+                           fmt("%.3g", res.noise_sigma_um) + " um of sensor noise. ";
+  if (res.mixture.empty())
+    return lead + "No candidate explains it: the best (" + std::string(to_string(best.effect.kind)) + ") leaves " +
+           fmt("%.0f", 100.0 * std::max(excess(best.errors), 0.0) / std::max(excess.base, 1e-300)) +
+           "% of the excess residual variance" + runner_up + ".";
   std::string text = lead + "Best explanation: " + best.explanation;
-  if (pair_ok)
+  if (pair)
     text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
-           fmt("%.3g", res.contribution[0]) + " um^2 of held-out MSE) and " + std::string(to_string(chosen[1].kind)) +
-           " (" + fmt("%.3g", res.contribution[1]) + " um^2); held-out RMSE " + fmt("%.3g", nuis.rmse_validation_um) +
-           " -> " + fmt("%.3g", res.fitted.rmse_validation_um) + " um";
+           fmt("%.3g", res.contribution[0]) + " um^2 of held-out MSE) and " +
+           std::string(to_string(res.mixture[1].kind)) + " (" + fmt("%.3g", res.contribution[1]) +
+           " um^2); held-out RMSE " + fmt("%.3g", nuis.rmse_validation_um) + " -> " +
+           fmt("%.3g", res.fitted.rmse_validation_um) + " um";
   if (!res.ambiguous_with.empty()) {
     std::string names;
     for (const auto& n : res.ambiguous_with) names += (names.empty() ? "" : ", ") + n;
     text += ". Ambiguous: " + names + " explains the held-out data as well. " + res.separating_experiment;
   }
-  res.explanation = text + runner_up + ".";
+  return text + runner_up + ".";
+}
+
+/// Verdict from the fitted candidates, judged against the nuisance-only refit:
+/// a single effect, a mixture of two (both significant on held-out data), or unexplained.
+void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+            const DiagnosisOptions& o) {
+  const Excess excess(res);
+  const auto& best = res.candidates.front();
+  const bool single_ok = best.fitted && excess.base > 0.0 && excess(best.errors) <= o.explained_excess * excess.base;
+  PairFit pair;
+  if (best.fitted && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
+  const bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
+  if (pair_ok) {
+    res.fitted = pair.errors;
+    set_verdict(res, problem, pair.effects, pair.nominal);
+  } else if (single_ok) {
+    res.fitted = best.errors;
+    res.contribution = {excess.base - excess(best.errors)};
+    find_ambiguous(res, excess, o);
+    set_verdict(res, problem, {best.effect}, Nominal(best.time_scale, best.poly_shape, best.poly_next));
+  } else {
+    res.verdict = "unexplained";
+  }
+  res.explanation = explain_verdict(res, excess, pair_ok);
 }
 
 }  // namespace
