@@ -775,6 +775,26 @@ void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma,
   }
 }
 
+/// The nominal refit a candidate was fitted jointly with.
+Nominal nominal_of(const CandidateResult& c) { return {c.time_scale, c.poly_shape, c.poly_next}; }
+
+/// The fitted candidate of kind `k`, or null when that kind was not fitted.
+const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k) {
+  for (const auto& c : res.candidates)
+    if (c.fitted && c.effect.kind == k) return &c;
+  return nullptr;
+}
+
+/// Whether two effects can run in one model (not the same kind twice, nor two time-scale effects).
+bool can_run_together(const Effect& a, const Effect& b) {
+  try {
+    validate_mixture(std::vector<Effect>{a, b}, "mixture");
+    return true;
+  } catch (const ConfigError&) {
+    return false;
+  }
+}
+
 /// Every point of a candidate's coarse grid (the product of its parameters' starts), scored by
 /// `cost(effect)`, best first.
 template <class Cost>
@@ -851,16 +871,17 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
         if (cost < best[v]) {
           best[v] = cost;
           fits[v].effect = spaces[v].effects(z).front();
-          fits[v].time_scale = spaces[v].g_scale(z).time_scale;
-          fits[v].poly_shape = spaces[v].g_scale(z).shape;
-          fits[v].poly_next = spaces[v].g_scale(z).next;
+          const Nominal k = spaces[v].g_scale(z);
+          fits[v].time_scale = k.time_scale;
+          fits[v].poly_shape = k.shape;
+          fits[v].poly_next = k.next;
         }
       }
     }
     c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
     c.fitted = true;
     const std::vector<Effect> e{c.effect};
-    const auto pred = problem.predict(e, Nominal(c.time_scale, c.poly_shape, c.poly_next), true);
+    const auto pred = problem.predict(e, nominal_of(c), true);
     c.gain = pred.gain;
     c.errors = errors_of(data, pred.y, res.held_out);
     c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
@@ -891,7 +912,7 @@ struct PairFit {
   double score = INFINITY;
 };
 
-constexpr size_t kPairsTried = 3;  ///< second effects from the forward selection fitted jointly with the leader
+constexpr size_t kPairsTried = 3;  ///< second effects fitted jointly with the leader, from each selection
 
 /// The second effects worth fitting with the leader `a`: every other candidate's coarse grid scored with `a`
 /// fixed at its fit (the evidence for a second effect in what `a` leaves, not what explains the same
@@ -899,14 +920,9 @@ constexpr size_t kPairsTried = 3;  ///< second effects from the forward selectio
 std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& problem, const std::vector<Series>& data,
                                          const DataScale& scale, const DiagnosisOptions& o, size_t count) {
   std::vector<std::pair<double, Effect>> ranked;
-  const Nominal k(a.time_scale, a.poly_shape, a.poly_next);
+  const Nominal k = nominal_of(a);
   for (EffectKind kind : kCandidateEffects) {
-    const std::vector<Effect> kinds{a.effect, Effect{kind, {}}};
-    try {
-      validate_mixture(kinds, "mixture");
-    } catch (const ConfigError&) {
-      continue;  // the same kind twice, or two time-scale effects
-    }
+    if (!can_run_together(a.effect, Effect{kind, {}})) continue;
     FitSpace space({kind}, scale, false, o, &data);
     const auto grid = coarse_grid(space, [&](const Effect& b) {
       const std::vector<Effect> e{a.effect, b};
@@ -920,23 +936,18 @@ std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& prob
   return out;
 }
 
-/// The starts of the second effect: the forward selection's best, then the two best fitted single
-/// runners-up (a second effect large enough to nearly lead alone, which the leader's fit may have
-/// partly absorbed, so its evidence in the leader's residual is weak) when not already among them.
+/// The starts of the second effect: with o.forward_pairs, the forward selection's best; then the three
+/// best fitted single runners-up that can run with the leader (a second effect large enough to nearly lead
+/// alone, which the leader's fit may have partly absorbed, so its evidence in the leader's residual is
+/// weak) when not already among them.
 std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                    const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  // The fitted runners-up first (the old selection); the forward selection only with o.forward_pairs.
   std::vector<Effect> out;
   if (o.forward_pairs) out = second_effect_starts(a, problem, data, scale, o, kPairsTried);
-  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < 3; ++i) {
+  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i) {
     const Effect& b = res.candidates[i].effect;
-    const std::vector<Effect> both{a.effect, b};
-    try {
-      validate_mixture(both, "mixture");
-    } catch (const ConfigError&) {
-      continue;
-    }
+    if (!can_run_together(a.effect, b)) continue;
     if (std::none_of(out.begin(), out.end(), [&](const Effect& e) { return e.kind == b.kind; })) out.push_back(b);
     ++added;
   }
@@ -949,16 +960,15 @@ std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem,
 Eigen::VectorXd fit_pair(const DiagnosisResult& res, Problem& problem, const FitSpace& space, const Effect& b,
                          const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  Nominal kb;
-  for (const auto& c : res.candidates)
-    if (c.fitted && c.effect.kind == b.kind) kb = Nominal(c.time_scale, c.poly_shape, c.poly_next);
+  const auto* fitted_b = fitted_candidate(res, b.kind);
+  const Nominal kb = fitted_b ? nominal_of(*fitted_b) : Nominal{};
   const FitSpace lead({a.effect.kind}, scale, false, o, &data);
   const auto regrid = coarse_grid(lead, [&](const Effect& x) {
     const std::vector<Effect> e{x, b};
     return problem.residual(e, kb).squaredNorm();
   });
   const std::pair<std::vector<Effect>, Nominal> starts[] = {
-      {{a.effect, b}, Nominal(a.time_scale, a.poly_shape, a.poly_next)},
+      {{a.effect, b}, nominal_of(a)},
       {{lead.effects(regrid.front().second).front(), b}, kb}};
   double cost = INFINITY;
   Eigen::VectorXd z;
@@ -1085,20 +1095,15 @@ struct Excess {
 /// over the two) and material. Orders the pair dominant first and sets `res.contribution` when it is.
 bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std::vector<Series>& data,
                 const Excess& excess, const DiagnosisOptions& o) {
-  const auto alone = [&](EffectKind k) -> const CandidateResult* {
-    for (const auto& c : res.candidates)
-      if (c.fitted && c.effect.kind == k) return &c;
-    return nullptr;
-  };
   const auto alone_y = [&](const CandidateResult* c) {
     if (!c)
       return problem.predict({}, Nominal(res.nominal_refit.time_scale, res.nominal_refit.poly_shape,
                                          res.nominal_refit.poly_next_slope), true).y;
     const std::vector<Effect> e{c->effect};
-    return problem.predict(e, Nominal(c->time_scale, c->poly_shape, c->poly_next), true).y;
+    return problem.predict(e, nominal_of(*c), true).y;
   };
-  const auto* a0 = alone(pair.effects[0].kind);
-  const auto* a1 = alone(pair.effects[1].kind);
+  const auto* a0 = fitted_candidate(res, pair.effects[0].kind);
+  const auto* a1 = fitted_candidate(res, pair.effects[1].kind);
   const double level = o.false_alarm_rate / 2.0;
   // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair.
   const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level);
@@ -1193,7 +1198,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     res.fitted = best.errors;
     res.contribution = {excess.base - excess(best.errors)};
     find_ambiguous(res, excess, o);
-    set_verdict(res, problem, {best.effect}, Nominal(best.time_scale, best.poly_shape, best.poly_next));
+    set_verdict(res, problem, {best.effect}, nominal_of(best));
   } else {
     res.verdict = "unexplained";
   }
