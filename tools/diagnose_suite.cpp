@@ -183,8 +183,28 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
 
 struct CaseOutcome {
   std::string verdict, mixture, error;
+  std::string leaders;  ///< the three best fitted candidates and the share of the excess each leaves
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
 };
+
+/// "creep 0.21 hysteresis 0.35 ...": the three best fitted candidates, each with the share of the nuisance
+/// refit's excess held-out MSE it leaves (the verdict needs at most DiagnosisOptions::explained_excess).
+std::string leaders_text(const DiagnosisResult& d) {
+  const double s2 = d.noise_sigma_um * d.noise_sigma_um;
+  // The verdict's yardstick: held-out data when the mismatch reaches it, else the fit segment.
+  const bool held_out = d.nominal_refit.errors.rmse_validation_um * d.nominal_refit.errors.rmse_validation_um - s2 > 0.2 * s2;
+  const auto rmse = [&](const ModelErrors& e) { return held_out ? e.rmse_validation_um : e.rmse_fit_um; };
+  const double base = rmse(d.nominal_refit.errors) * rmse(d.nominal_refit.errors) - s2;
+  std::string text;
+  for (size_t i = 0; i < d.candidates.size() && i < 3 && d.candidates[i].fitted; ++i) {
+    const double v = rmse(d.candidates[i].errors);
+    char b[64];
+    std::snprintf(b, sizeof b, "%s%s %.2f", text.empty() ? "" : " ", std::string(to_string(d.candidates[i].effect.kind)).c_str(),
+                  base > 0 ? (v * v - s2) / base : NAN);
+    text += b;
+  }
+  return text;
+}
 
 CaseOutcome run_case(const std::filesystem::path& dir) {
   namespace fs = std::filesystem;
@@ -202,6 +222,7 @@ CaseOutcome run_case(const std::filesystem::path& dir) {
     for (const auto& e : d.mixture) o.mixture += (o.mixture.empty() ? "" : "+") + std::string(to_string(e.kind));
     o.ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
     o.ratio_aligned = d.fitted.rmse_validation_um / d.aligned.rmse_validation_um;
+    o.leaders = leaders_text(d);
   } catch (const std::exception& e) {
     o.verdict = "error";
     o.error = e.what();
@@ -236,10 +257,11 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
       const auto& o = out[i];
       const bool single = c.effects.find('+') == std::string::npos;
       const bool ok = single ? o.verdict == c.effects : names_both(o.mixture, c.effects);
-      char line[512];
-      std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s%s%s\n",
+      char line[768];
+      std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s\n",
                     c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
-                    ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.error.empty() ? "" : "  error: ", o.error.c_str());
+                    ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.error.empty() ? "" : "  error: ",
+                    o.error.c_str());
       const std::lock_guard lock(log_mutex);
       log << line << std::flush;
     }
