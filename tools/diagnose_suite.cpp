@@ -188,19 +188,13 @@ struct CaseOutcome {
 };
 
 /// "creep 0.21 hysteresis 0.35 ...": the three best fitted candidates, each with the share of the nuisance
-/// refit's excess held-out MSE it leaves (the verdict needs at most DiagnosisOptions::explained_excess).
+/// refit's excess MSE it leaves (excess_share_left: the verdict's yardstick).
 std::string leaders_text(const DiagnosisResult& d) {
-  const double s2 = d.noise_sigma_um * d.noise_sigma_um;
-  // The verdict's yardstick: held-out data when the mismatch reaches it, else the fit segment.
-  const bool held_out = d.nominal_refit.errors.rmse_validation_um * d.nominal_refit.errors.rmse_validation_um - s2 > 0.2 * s2;
-  const auto rmse = [&](const ModelErrors& e) { return held_out ? e.rmse_validation_um : e.rmse_fit_um; };
-  const double base = rmse(d.nominal_refit.errors) * rmse(d.nominal_refit.errors) - s2;
   std::string text;
   for (size_t i = 0; i < d.candidates.size() && i < 3 && d.candidates[i].fitted; ++i) {
-    const double v = rmse(d.candidates[i].errors);
     char b[64];
     std::snprintf(b, sizeof b, "%s%s %.2f", text.empty() ? "" : " ", std::string(to_string(d.candidates[i].effect.kind)).c_str(),
-                  base > 0 ? (v * v - s2) / base : NAN);
+                  excess_share_left(d, d.candidates[i].errors));
     text += b;
   }
   return text;

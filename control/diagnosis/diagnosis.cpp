@@ -1297,6 +1297,11 @@ void explain_candidates(DiagnosisResult& res) {
 
 }  // namespace
 
+double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
+  const Excess excess(res);
+  return excess.base > 0.0 ? excess(e) / excess.base : NAN;
+}
+
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
   check_inputs(model, data);
   DiagnosisResult res;

@@ -185,6 +185,11 @@ HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vec
                                  const std::vector<std::vector<double>>& y_b, const std::vector<std::vector<char>>& held_out,
                                  double block_s, double level);
 
+/// The share of the nuisance-only refit's excess (above-noise) MSE that a model with errors `e` still leaves,
+/// on the verdict's yardstick: the held-out data when the mismatch reaches them, else the fit segment (a
+/// verdict needs at most DiagnosisOptions::explained_excess). NaN when the refit leaves no excess.
+double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
+
 /// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),
 /// ConfigError on a model that cannot be simulated (unstable G, non-monotone f
 /// over the recorded voltage range).

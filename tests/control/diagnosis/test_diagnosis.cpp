@@ -53,6 +53,9 @@ TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
   EXPECT_NEAR(r.effect.p[1], 2.5, 0.5);
   EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
   ASSERT_FALSE(r.mismatch.empty());
+  // The verdict's yardstick: the refit leaves all of its own excess, a named effect at most 30% of it.
+  EXPECT_NEAR(excess_share_left(r, r.nominal_refit.errors), 1.0, 1e-12);
+  EXPECT_LE(excess_share_left(r, r.fitted), DiagnosisOptions{}.explained_excess);
 }
 
 TEST(Diagnose, FitsOneEffectAcrossSeveralRecordings) {
