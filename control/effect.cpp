@@ -39,11 +39,14 @@ TransferFunction linear_block(const TransferFunction& G, bool creep, const std::
     }
   }
   if (mode) {
-    const double wn = 2.0 * std::numbers::pi * pm[0], m = 1.0 - pm[2];  // participation
+    const double wn = 2.0 * std::numbers::pi * pm[0], m = 1.0 - pm[2], rho = pm[3];  // participations
+    const double dc = TransferFunction(num, den).dc_gain();
     const std::vector<double> mode_den{1.0, 2.0 * pm[1] * wn, wn * wn};
     // (1 - m) mode_den + m wn^2: the mode's zeros sit just above its poles when m is small.
     const std::vector<double> mode_num{1.0 - m, (1.0 - m) * 2.0 * pm[1] * wn, wn * wn};
-    num = polynomial_multiply(num, mode_num);
+    // Over the common denominator den mode_den: the series path and the parallel mode rho dc wn^2 / mode_den.
+    num = add_polynomials(polynomial_multiply({1.0 - rho}, polynomial_multiply(num, mode_num)),
+                          polynomial_multiply({rho * dc * wn * wn}, den));
     den = polynomial_multiply(den, mode_den);
   }
   return TransferFunction(num, den);
@@ -109,8 +112,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       for (double f : {3.0, 8.0, 16.0, 32.0, 64.0, 150.0, 400.0, 1000.0})
         if (f < f_max) starts.push_back(f);
       return {{"frequency_Hz", std::min(0.5, 0.1 * f_max), f_max, true, starts},
-              {"damping_ratio", 0.005, 2.0, true, {0.05, 0.3}},
-              {"direct_fraction", 0.0, 1.0, false, {0.0, 0.9}, 0.0}};
+              // Underdamped enough to peak: an overdamped "mode" low in frequency is a slow lag that passes for creep.
+              {"damping_ratio", 0.005, 0.7, true, {0.05, 0.3}},
+              {"direct_fraction", 0.0, 1.0, false, {0.0, 0.9}, 0.0},
+              {"parallel_fraction", 0.0, 1.0, false, {0.0, 0.1}, 0.0}};
     }
     case EffectKind::drift: {
       const double dur = std::max(d.duration_s, 0.0);

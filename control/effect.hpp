@@ -95,7 +95,7 @@ struct DataScale {
 inline constexpr int kDelayLineSamples = 256;
 
 /// Maximum number of parameters of one effect.
-inline constexpr int kMaxEffectParams = 3;
+inline constexpr int kMaxEffectParams = 4;
 
 /// Maximum number of effects one plant runs at once (a mixture of two).
 inline constexpr int kMaxEffects = 2;
@@ -188,9 +188,11 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///  - delay: extra transport delay (fractional, linear interpolation);
 ///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing;
 ///  - slew_limit: the amplifier voltage changes at most S V/s;
-///  - resonance: a structural mode in series, d + (1 - d) w_n^2 / (s^2 + 2 zeta w_n s + w_n^2),
+///  - resonance: a structural mode M(s) = w_n^2 / (s^2 + 2 zeta w_n s + w_n^2), in series, G (d + (1 - d) M),
 ///    d the direct fraction (0: a full second-order low-pass; near 1: a mode with a small participation,
-///    a pole pair with a zero pair just above it);
+///    a pole pair with a zero pair just above it), and in parallel with share rho: (1 - rho) G (d + (1 - d) M)
+///    + rho G(0) M (a fast mode fed by the actuator's force, not filtered by G: modal superposition; rho 0,
+///    the default, is the series form alone);
 ///  - drift: offset + rate max(t - onset, 0), independent of the input;
 ///  - bias_dependent_dynamics: G runs (1 + beta y_op / y_ref) times slower, y_op the displacement
 ///    low-passed over the operating-point time constant and y_ref = reference_um (diagnose sets it to the

@@ -815,6 +815,22 @@ std::vector<std::pair<double, Eigen::VectorXd>> coarse_grid(const FitSpace& spac
   return grid;
 }
 
+/// The yardstick of the verdict: excess (above-noise) MSE, on the held-out data when the mismatch reaches
+/// it, otherwise on the fit segment; `base` is what the nuisance-only refit leaves.
+struct Excess {
+  double s2 = 0.0, base = 0.0;
+  bool on_validation = true;
+  explicit Excess(const DiagnosisResult& res) : s2(res.noise_sigma_um * res.noise_sigma_um) {
+    const auto& nuis = res.nominal_refit.errors;
+    on_validation = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
+    base = (*this)(nuis);
+  }
+  double operator()(const ModelErrors& e) const {
+    const double r = on_validation ? e.rmse_validation_um : e.rmse_fit_um;
+    return r * r - s2;
+  }
+};
+
 /// Coarse grid (the evidence) for every candidate, then joint least squares
 /// (effect parameters and G's time scale; gain, offset and initial state by
 /// projection) from the two best grid points of the leading candidates.
@@ -891,13 +907,19 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
     if (a.fitted != b.fitted) return a.fitted;
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
   });
-  // When the held-out data cannot separate the two best (scores within the
-  // tie margin), the one that also explains the fitting segment better wins.
+  // When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
+  // of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
+  // its low-frequency gain), the one that explains the fitting segment clearly better wins: by a share of
+  // what the leader leaves there and by the ambiguity margin of what the nuisance-only refit leaves there
+  // (two fits at the noise floor differ by noise).
   if (res.candidates.size() > 1 && res.candidates[1].fitted) {
+    const Excess excess(res);
     const auto& a = res.candidates[0];
     const auto& b = res.candidates[1];
-    const double fit_a = a.errors.rmse_fit_um * a.errors.rmse_fit_um, fit_b = b.errors.rmse_fit_um * b.errors.rmse_fit_um;
-    if (b.score <= a.score * (1.0 + o.tie_margin) && fit_b * (1.0 + o.tie_margin) < fit_a)
+    const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - excess.s2; };
+    const double gain = fit_excess(a.errors) - fit_excess(b.errors);
+    if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base &&
+        gain > o.tie_fit_gain * fit_excess(a.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors))
       std::swap(res.candidates[0], res.candidates[1]);
   }
 }
@@ -1073,22 +1095,6 @@ std::string separating_experiment(EffectKind a, EffectKind b) {
 }  // namespace
 
 namespace {
-
-/// The yardstick of the verdict: excess (above-noise) MSE, on the held-out data when the mismatch reaches
-/// it, otherwise on the fit segment; `base` is what the nuisance-only refit leaves.
-struct Excess {
-  double s2 = 0.0, base = 0.0;
-  bool on_validation = true;
-  explicit Excess(const DiagnosisResult& res) : s2(res.noise_sigma_um * res.noise_sigma_um) {
-    const auto& nuis = res.nominal_refit.errors;
-    on_validation = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
-    base = (*this)(nuis);
-  }
-  double operator()(const ModelErrors& e) const {
-    const double r = on_validation ? e.rmse_validation_um : e.rmse_fit_um;
-    return r * r - s2;
-  }
-};
 
 /// Whether both effects of `pair` are named: each significant on held-out data (the pair predicts the
 /// held-out data better than the other effect alone, a one-sided test at the false-alarm rate, Bonferroni

@@ -52,7 +52,8 @@ struct DiagnosisOptions {
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
   double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per fitted parameter
-  double tie_margin = 0.03;           ///< validation scores this close are a tie, broken by the fit segment
+  double tie_fit_gain = 0.25;         ///< of two candidates the held-out data cannot separate (ambiguity_margin), the
+                                      ///< runner-up leads when its fit-segment excess MSE is this share lower
   double explained_excess = 0.3;      ///< the chosen effect must leave at most this share of the excess MSE
   int candidates_to_fit = 10;          ///< the leading candidates (by evidence) that are fitted fully
 };

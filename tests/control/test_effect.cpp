@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <complex>
+#include <numbers>
 #include <vector>
 
 #include "control/config_error.hpp"
@@ -167,6 +169,32 @@ TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
 TEST(Effect, NamesRoundTrip) {
   for (auto k : kCandidateEffects) EXPECT_EQ(parse_effect_kind(to_string(k)), k);
   EXPECT_FALSE(parse_effect_kind("gravity"));
+}
+
+TEST(AugmentedPlant, AParallelModeIsTheShareRhoOfGZeroTimesTheMode) {
+  // (1 - rho) G + rho G(0) M(s), M = wn^2 / (s^2 + 2 zeta wn s + wn^2), with no series part (d = 1).
+  const auto G = paper_model(3).G;
+  const double f_Hz = 6.0, zeta = 0.03, rho = 0.04, wn = 2.0 * std::numbers::pi * f_Hz;
+  const Effect e{EffectKind::resonance, {f_Hz, zeta, 1.0, rho}};
+  const auto L = linear_block(G, std::span<const Effect>(&e, 1));
+  for (double w : {0.0, 0.3, 3.0, wn, 100.0}) {
+    const std::complex<double> s(0.0, w);
+    const auto expected = (1.0 - rho) * G(s) + rho * G.dc_gain() * wn * wn / (s * s + 2.0 * zeta * wn * s + wn * wn);
+    EXPECT_NEAR(std::abs(L(s) - expected), 0.0, 1e-9 * std::abs(expected)) << "at " << w << " rad/s";
+  }
+}
+
+TEST(AugmentedPlant, AParallelModeRingsAtItsShareOfTheWholeStepAndKeepsTheGain) {
+  // Fed by the force, the mode sees the step's whole displacement G(0) dx, not G's filtered response:
+  // its first overshoot alone is about rho times the step.
+  const auto u = steps(20000, 100.0, 300.0);
+  const auto y0 = run({}, u, 100.0), y = run({EffectKind::resonance, {6.0, 0.03, 1.0, 0.04}}, u, 100.0);
+  double peak = 0.0;
+  for (size_t k = 0; k < y.size(); ++k) peak = std::max(peak, std::abs(y[k] - y0[k]));
+  const double step_um = y0.back() - y0.front();
+  EXPECT_GT(peak, 0.04 * step_um);
+  EXPECT_LT(peak, 0.04 * 2.0 * step_um);  // at most the mode's whole overshoot (1.91 at zeta 0.03)
+  EXPECT_NEAR(y.back(), y0.back(), 1e-3);  // the same gain (G's slow pole is 5e-6 from settled at 20 s)
 }
 
 }  // namespace

@@ -75,6 +75,17 @@ TEST(Diagnose, RecoversAWholeSampleDelay) {
   EXPECT_NEAR(r.effect.p[0], 2 * Ts, 0.2 * Ts);
 }
 
+TEST(Diagnose, FindsAStructuralModeInParallelWithTheSlowGel) {
+  // A 6 Hz mode fed by the force (not filtered by G), 4% of the displacement: the series form alone cannot
+  // draw it on the gel, whose G has rolled off by 40 dB there.
+  const Effect truth{EffectKind::resonance, {6.0, 0.03, 1.0, 0.04}};
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05)});
+  ASSERT_EQ(r.verdict, "resonance") << r.explanation;
+  EXPECT_NEAR(r.effect.p[0], 6.0, 0.3);
+  EXPECT_GT(r.effect.p[3], 0.02);  // the parallel share carries the mode
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
+}
+
 TEST(Diagnose, AMismatchNoCandidateExplainsIsUnexplained) {
   // A random telegraph offset of +-0.4 um switching every ~0.5 s, unrelated to u.
   auto s = recording({}, 0.05);
