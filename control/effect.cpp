@@ -153,7 +153,7 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
              "speed than contraction";
     case EffectKind::slew_limit:
       return "slew limit: the amplifier cannot charge the actuator's capacitance faster than a fixed rate";
-    case EffectKind::resonance: return "a structural resonance (mass-spring mode) in series with the gel dynamics";
+    case EffectKind::resonance: return "a structural resonance (mass-spring mode): in series behind the gel dynamics, or driven beside them by the actuator force (parallel share)";
     case EffectKind::drift:
       return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage";
     case EffectKind::bias_dependent_dynamics:

@@ -729,6 +729,27 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
   return a;
 }
 
+/// What the first pass hands the second when its leading candidate fits clearly better at another delay.
+struct SecondPass {
+  Alignment alignment;  ///< the first pass's
+  std::vector<CandidateResult> candidates;  ///< the first pass's fits: the second pass's starts
+  int delay_samples = 0;
+  std::string leader;
+};
+
+/// The second pass's alignment: the first pass's estimates, with the delay its leading candidate fits best with.
+Alignment realign(Problem& p, Alignment a, int delay_samples, const std::string& leader) {
+  a.note = (a.declared ? "the model file declares io_delay_samples = " + std::to_string(*a.declared)
+                       : std::string("the model file does not declare io_delay_samples")) +
+           "; the nominal model alone fits best with " + fmt("%.2g", a.io_delay_samples) + " samples, but fitted with " +
+           "the leading candidate (" + leader + ") the data take " + std::to_string(delay_samples) +
+           ", which the analysis uses (an unmodelled effect pulls the nominal model's delay)";
+  a.used_samples = delay_samples;
+  p.set_delay(a.used_samples);
+  p.set_initial(a.initial_V);
+  return a;
+}
+
 }  // namespace
 
 namespace {
@@ -831,12 +852,15 @@ struct Excess {
   }
 };
 
-/// Coarse grid (the evidence) for every candidate, then joint least squares
-/// (effect parameters and G's time scale; gain, offset and initial state by
-/// projection) from the two best grid points of the leading candidates.
-void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
-                    const DiagnosisOptions& o, double nuisance_cost) {
-  std::vector<std::vector<Eigen::VectorXd>> starts;
+/// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
+/// res.candidates' order.
+using Starts = std::vector<std::vector<Eigen::VectorXd>>;
+
+/// Coarse grid (the evidence) for every candidate: fills res.candidates with it and returns the two best
+/// grid points of each.
+Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                   const DiagnosisOptions& o, double nuisance_cost) {
+  Starts starts;
   for (EffectKind kind : kCandidateEffects) {
     FitSpace space({kind}, scale, false, o, &data);
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
@@ -858,70 +882,141 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
     }
     starts.push_back(best);
   }
-  std::vector<size_t> order(res.candidates.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(),
-            [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
-  for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank) {
-    auto& c = res.candidates[order[rank]];
-    const FitSpace space({c.effect.kind}, scale, true, o, &data);
-    // A loop is fitted with the earlier shape (threshold_spread 0) too; the free shape is kept only when it
-    // fits clearly better: on short or closed-loop data it otherwise bends to the fit segment alone.
-    std::vector<FitSpace> spaces{space};
-    if (c.effect.kind == EffectKind::hysteresis) {
-      spaces.push_back(space);
-      auto& spread = spaces.back().specs[2];
-      spread.lower = spread.upper = 0.0;
-      spread.fixed = true;
-    }
-    std::vector<double> best(spaces.size(), INFINITY);
-    std::vector<CandidateResult> fits(spaces.size(), c);
-    for (size_t v = 0; v < spaces.size(); ++v) {
-      for (const auto& s0 : starts[order[rank]]) {
-        Eigen::VectorXd z(static_cast<Eigen::Index>(spaces[v].specs.size()));
-        z.head(s0.size() - 1) = s0.head(s0.size() - 1);
-        z.tail(kNominalParams) =
-            spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
-        double cost = 0.0;
-        z = fit_staged(problem, spaces[v], z, cost);
-        if (cost < best[v]) {
-          best[v] = cost;
-          fits[v].effect = spaces[v].effects(z).front();
-          const Nominal k = spaces[v].g_scale(z);
-          fits[v].time_scale = k.time_scale;
-          fits[v].poly_shape = k.shape;
-          fits[v].poly_next = k.next;
-        }
+  return starts;
+}
+
+/// The second pass starts each candidate where the first pass fitted it (its evidence is the first
+/// pass's): one start each instead of the grid's two, a refit after a change of one sample of delay.
+Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& first, const std::vector<Series>& data,
+                   const DataScale& scale, const DiagnosisOptions& o) {
+  Starts starts;
+  for (const auto& c : first) {
+    const FitSpace space({c.effect.kind}, scale, false, o, &data);
+    const auto z = space.z_of({c.effect}, {});
+    starts.push_back({Eigen::VectorXd(z.size() + 1)});
+    starts.back().front() << z, c.fitted ? c.time_scale : 1.0;
+    res.candidates.push_back(c);
+    res.candidates.back().fitted = false;
+  }
+  return starts;
+}
+
+/// Joint least squares of one candidate (effect parameters and the nominal refit; gain, offset and initial
+/// state by projection) from each of its starts; fills its fitted parameters, errors and score.
+void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& starts, const DiagnosisResult& res,
+                   Problem& problem, const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  const FitSpace space({c.effect.kind}, scale, true, o, &data);
+  // A loop is fitted with the earlier shape (threshold_spread 0) too; the free shape is kept only when it
+  // fits clearly better: on short or closed-loop data it otherwise bends to the fit segment alone.
+  std::vector<FitSpace> spaces{space};
+  if (c.effect.kind == EffectKind::hysteresis) {
+    spaces.push_back(space);
+    auto& spread = spaces.back().specs[2];
+    spread.lower = spread.upper = 0.0;
+    spread.fixed = true;
+  }
+  std::vector<double> best(spaces.size(), INFINITY);
+  std::vector<CandidateResult> fits(spaces.size(), c);
+  for (size_t v = 0; v < spaces.size(); ++v) {
+    for (const auto& s0 : starts) {
+      Eigen::VectorXd z(static_cast<Eigen::Index>(spaces[v].specs.size()));
+      z.head(s0.size() - 1) = s0.head(s0.size() - 1);
+      z.tail(kNominalParams) =
+          spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
+      double cost = 0.0;
+      z = fit_staged(problem, spaces[v], z, cost);
+      if (cost < best[v]) {
+        best[v] = cost;
+        fits[v].effect = spaces[v].effects(z).front();
+        const Nominal k = spaces[v].g_scale(z);
+        fits[v].time_scale = k.time_scale;
+        fits[v].poly_shape = k.shape;
+        fits[v].poly_next = k.next;
       }
     }
-    c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
-    c.fitted = true;
-    const std::vector<Effect> e{c.effect};
-    const auto pred = problem.predict(e, nominal_of(c), true);
-    c.gain = pred.gain;
-    c.errors = errors_of(data, pred.y, res.held_out);
-    c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
-              (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
   }
+  c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
+  c.fitted = true;
+  const std::vector<Effect> e{c.effect};
+  const auto pred = problem.predict(e, nominal_of(c), true);
+  c.gain = pred.gain;
+  c.errors = errors_of(data, pred.y, res.held_out);
+  c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
+            (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
+}
+
+/// When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
+/// of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
+/// its low-frequency gain), the one that explains the fitting segment clearly better leads: by a share of
+/// what the leader leaves there and by the ambiguity margin of what the nuisance-only refit leaves there
+/// (two fits at the noise floor differ by noise).
+void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
+  if (res.candidates.size() < 2 || !res.candidates[1].fitted) return;
+  const Excess excess(res);
+  const auto& a = res.candidates[0];
+  const auto& b = res.candidates[1];
+  const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - excess.s2; };
+  const double gain = fit_excess(a.errors) - fit_excess(b.errors);
+  if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base &&
+      gain > o.tie_fit_gain * fit_excess(a.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors))
+    std::swap(res.candidates[0], res.candidates[1]);
+}
+
+/// Fitted candidates by held-out score (then the rest by evidence), ties broken on the fit segment.
+void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   std::stable_sort(res.candidates.begin(), res.candidates.end(), [](const CandidateResult& a, const CandidateResult& b) {
     if (a.fitted != b.fitted) return a.fitted;
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
   });
-  // When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
-  // of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
-  // its low-frequency gain), the one that explains the fitting segment clearly better wins: by a share of
-  // what the leader leaves there and by the ambiguity margin of what the nuisance-only refit leaves there
-  // (two fits at the noise floor differ by noise).
-  if (res.candidates.size() > 1 && res.candidates[1].fitted) {
-    const Excess excess(res);
-    const auto& a = res.candidates[0];
-    const auto& b = res.candidates[1];
-    const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - excess.s2; };
-    const double gain = fit_excess(a.errors) - fit_excess(b.errors);
-    if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base &&
-        gain > o.tie_fit_gain * fit_excess(a.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors))
-      std::swap(res.candidates[0], res.candidates[1]);
+  break_tie(res, o);
+}
+
+/// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit
+/// of the leading ones by evidence, ranked by held-out score.
+void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                    const DiagnosisOptions& o, double nuisance_cost, const std::vector<CandidateResult>* warm) {
+  const Starts starts =
+      warm ? warm_starts(res, *warm, data, scale, o) : grid_starts(res, problem, data, scale, o, nuisance_cost);
+  std::vector<size_t> order(res.candidates.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
+  for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank)
+    fit_candidate(res.candidates[order[rank]], starts[order[rank]], res, problem, data, scale, o);
+  rank_candidates(res, o);
+}
+
+/// The delay was estimated with the nominal model alone, which an unmodelled effect can pull off by a
+/// sample (on a closed-loop rig with one sample of delay and a creep, the nominal fits best with none).
+/// So the leading candidate is refitted at the neighbouring delays (and the declared one) that the file
+/// allows: up to the declared delay (more is a `delay` effect), any up to the search range when it is
+/// silent. Returns the delay it fits the fit segment clearly better with, if any: by a quarter of the excess
+/// it leaves at the first delay (the tie rule's share) and by a tenth of the noise variance (far above the
+/// spread between two fits at the noise floor).
+std::optional<int> leader_delay(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                                const DataScale& scale, const DiagnosisOptions& o) {
+  if (res.candidates.empty() || !res.candidates[0].fitted || res.candidates[0].effect.kind == EffectKind::delay) return {};
+  const auto& lead = res.candidates[0];
+  const int used = static_cast<int>(std::lround(res.alignment.used_samples));
+  const auto& declared = res.alignment.declared;
+  const int most = declared ? *declared : o.max_undeclared_delay_samples;
+  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
+  const FitSpace space({lead.effect.kind}, scale, true, o, &data);
+  const std::vector<Effect> e{lead.effect};
+  const double at_used = fit_mse(problem, e, nominal_of(lead));
+  double best = at_used;
+  std::optional<int> better;
+  for (int d : {used - 1, used + 1, declared.value_or(used)}) {
+    if (d < 0 || d > most || d == used || d == better) continue;
+    problem.set_delay(d);
+    double cost = 0.0;
+    const auto z = fit_staged(problem, space, space.z_of(e, nominal_of(lead)), cost);
+    const double mse = fit_mse(problem, space.effects(z), space.g_scale(z));
+    const double gain = at_used - mse;
+    if (mse < best && gain > o.tie_fit_gain * (at_used - s2) && gain > o.ambiguity_margin * s2) best = mse, better = d;
   }
+  problem.set_delay(used);
+  return better;
 }
 
 /// A fitted mixture of two effects.
@@ -1022,6 +1117,27 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
     if (p.score < best.score) best = std::move(p);
   }
   return best;
+}
+
+/// A pair's joint fit can find a member's optimum that the member's own fit missed (a creep stuck at its
+/// fraction bound alone, found exactly beside a loop of nothing). Each member is therefore refitted alone
+/// from its value in the pair and keeps that fit when it explains the fit segment better, so a second
+/// effect is never credited with its partner's better fit. Re-ranks the candidates.
+void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
+                         const DataScale& scale, const DiagnosisOptions& o) {
+  for (const Effect& e : pair.effects) {
+    const auto it = std::find_if(res.candidates.begin(), res.candidates.end(),
+                                 [&](const CandidateResult& c) { return c.fitted && c.effect.kind == e.kind; });
+    if (it == res.candidates.end()) continue;
+    const FitSpace space({e.kind}, scale, false, o, &data);
+    const auto z = space.z_of({e}, {});
+    Eigen::VectorXd start(z.size() + 1);
+    start << z, pair.nominal.time_scale;
+    CandidateResult alone = *it;
+    fit_candidate(alone, {start}, res, problem, data, scale, o);
+    if (alone.errors.rmse_fit_um < it->errors.rmse_fit_um) *it = alone;
+  }
+  rank_candidates(res, o);
 }
 
 /// Student t upper quantile at tail p with `df` degrees of freedom (Cornish-Fisher, first two terms).
@@ -1156,6 +1272,16 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
   res.alignment.offset_um = pc.offset_um;
 }
 
+/// The text of every candidate: what it means physically, its fitted parameters and what it does to the held-out error.
+void explain_candidates(DiagnosisResult& res) {
+  for (auto& c : res.candidates)
+    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
+                    (c.fitted ? " (G time scale " + fmt("%.3g", c.time_scale) + ", gain " + fmt("%.3g", c.gain) +
+                                    "); validation RMSE " + fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) +
+                                    " -> " + fmt("%.3g", c.errors.rmse_validation_um) + " um"
+                              : " (coarse grid only: not among the leading candidates)");
+}
+
 /// The summary sentence of the verdict (or of why there is none).
 std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bool pair) {
   const auto& best = res.candidates.front();
@@ -1192,10 +1318,11 @@ std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bo
 void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
             const DiagnosisOptions& o) {
   const Excess excess(res);
+  PairFit pair;
+  if (res.candidates.front().fitted && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
+  if (std::isfinite(pair.score)) refit_members_alone(res, pair, problem, data, scale, o);
   const auto& best = res.candidates.front();
   const bool single_ok = best.fitted && excess.base > 0.0 && excess(best.errors) <= o.explained_excess * excess.base;
-  PairFit pair;
-  if (best.fitted && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
   const bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok) {
     res.fitted = pair.errors;
@@ -1208,6 +1335,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   } else {
     res.verdict = "unexplained";
   }
+  explain_candidates(res);
   res.explanation = explain_verdict(res, excess, pair_ok);
 }
 
@@ -1234,8 +1362,9 @@ void check_inputs(const HammersteinModel& model, const std::vector<Series>& data
 /// (with the estimated delay when the file is silent); `aligned` adds the sensor offset and start state,
 /// which are not the model's fault. Returns the scale of the data (for the candidates' ranges).
 DataScale align_and_baseline(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
-                             const DiagnosisOptions& o) {
-  res.alignment = estimate_alignment(problem, data, o);
+                             const DiagnosisOptions& o, const std::optional<SecondPass>& second) {
+  res.alignment = second ? realign(problem, second->alignment, second->delay_samples, second->leader)
+                         : estimate_alignment(problem, data, o);
   const auto base = problem.predict({}, 1.0, false);
   res.y_baseline_um = problem.raw({}, 1.0, true);
   res.baseline = errors_of(data, res.y_baseline_um, res.held_out);
@@ -1291,16 +1420,6 @@ bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions
   return true;
 }
 
-/// The text of every candidate: what it means physically, its fitted parameters and what it does to the held-out error.
-void explain_candidates(DiagnosisResult& res) {
-  for (auto& c : res.candidates)
-    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
-                    (c.fitted ? " (G time scale " + fmt("%.3g", c.time_scale) + ", gain " + fmt("%.3g", c.gain) +
-                                    "); validation RMSE " + fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) +
-                                    " -> " + fmt("%.3g", c.errors.rmse_validation_um) + " um"
-                              : " (coarse grid only: not among the leading candidates)");
-}
-
 }  // namespace
 
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
@@ -1310,20 +1429,30 @@ double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
 
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
   check_inputs(model, data);
-  DiagnosisResult res;
-  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-  Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V);
-  const DataScale scale = align_and_baseline(res, problem, data, o);
-  Nominal k;
-  auto refit = refit_and_test(res, problem, data, o, k);
-  if (!decide_none(res, refit, o)) {
-    // 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict.
-    fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm());
-    explain_candidates(res);
-    decide(res, problem, data, scale, o);
+  std::optional<SecondPass> second;
+  int first_pass_simulations = 0;
+  for (;;) {
+    DiagnosisResult res;
+    for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+    Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V);
+    const DataScale scale = align_and_baseline(res, problem, data, o, second);
+    Nominal k;
+    auto refit = refit_and_test(res, problem, data, o, k);
+    if (!decide_none(res, refit, o)) {
+      // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;
+      // 5. the verdict.
+      fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(),
+                     second ? &second->candidates : nullptr);
+      if (const auto d = second ? std::nullopt : leader_delay(res, problem, data, scale, o)) {
+        second = SecondPass{res.alignment, res.candidates, *d, std::string(to_string(res.candidates[0].effect.kind))};
+        first_pass_simulations = problem.simulations();
+        continue;
+      }
+      decide(res, problem, data, scale, o);
+    }
+    res.simulations = first_pass_simulations + problem.simulations();
+    return res;
   }
-  res.simulations = problem.simulations();
-  return res;
 }
 
 }  // namespace pvcgel::control::diagnosis

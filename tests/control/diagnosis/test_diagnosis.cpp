@@ -84,6 +84,24 @@ TEST(Diagnose, FindsAStructuralModeInParallelWithTheSlowGel) {
   EXPECT_NEAR(r.effect.p[0], 6.0, 0.3);
   EXPECT_GT(r.effect.p[3], 0.02);  // the parallel share carries the mode
   EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
+  // The mode's fast path pulls the nominal model alone to less delay than the declared (and true) one
+  // sample; fitted with the mode, the data take the declared sample again, and the analysis runs with it.
+  EXPECT_EQ(r.alignment.used_samples, 1.0) << r.alignment.note;
+  if (r.alignment.io_delay_samples < 0.5)
+    EXPECT_NE(r.alignment.note.find("leading candidate (resonance)"), std::string::npos) << r.alignment.note;
+}
+
+TEST(Diagnose, ALargeCreepIsOneEffectNotCreditedToASecondOneItsPairFitFound) {
+  // 20% creep with a 5 s time constant in 20 s: fitted alone from the grid, the creep can settle on its
+  // fraction bound with a 90 s spread; fitted beside any second effect it finds the truth, and that second
+  // effect must not be credited with the creep's better fit.
+  const Effect truth{EffectKind::creep, {0.2, 5.0}};
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05)});
+  ASSERT_EQ(r.verdict, "creep") << r.explanation;
+  EXPECT_EQ(r.mixture.size(), 1u) << r.explanation;
+  EXPECT_NEAR(r.effect.p[0], 0.2, 0.01);
+  EXPECT_NEAR(r.effect.p[1], 5.0, 0.25);
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
 }
 
 TEST(Diagnose, AMismatchNoCandidateExplainsIsUnexplained) {
