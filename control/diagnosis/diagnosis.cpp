@@ -8,6 +8,7 @@
 #include <numeric>
 #include <span>
 #include <stdexcept>
+#include <utility>
 
 #include "control/config_error.hpp"
 #include "control/state_space.hpp"
@@ -806,6 +807,10 @@ const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k
   return nullptr;
 }
 
+CandidateResult* fitted_candidate(DiagnosisResult& res, EffectKind k) {
+  return const_cast<CandidateResult*>(fitted_candidate(std::as_const(res), k));  // NOLINT: the const lookup, on a mutable result
+}
+
 /// Whether two effects can run in one model (not the same kind twice, nor two time-scale effects).
 bool can_run_together(const Effect& a, const Effect& b) {
   try {
@@ -856,6 +861,15 @@ struct Excess {
 /// res.candidates' order.
 using Starts = std::vector<std::vector<Eigen::VectorXd>>;
 
+/// A start of a candidate's full fit at a known effect (not a grid point) and G's time scale.
+Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& scale, const DiagnosisOptions& o,
+                         const std::vector<Series>& data) {
+  const auto z = FitSpace({e.kind}, scale, false, o, &data).z_of({e}, {});
+  Eigen::VectorXd start(z.size() + 1);
+  start << z, time_scale;
+  return start;
+}
+
 /// Coarse grid (the evidence) for every candidate: fills res.candidates with it and returns the two best
 /// grid points of each.
 Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
@@ -891,10 +905,7 @@ Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& fir
                    const DataScale& scale, const DiagnosisOptions& o) {
   Starts starts;
   for (const auto& c : first) {
-    const FitSpace space({c.effect.kind}, scale, false, o, &data);
-    const auto z = space.z_of({c.effect}, {});
-    starts.push_back({Eigen::VectorXd(z.size() + 1)});
-    starts.back().front() << z, c.fitted ? c.time_scale : 1.0;
+    starts.push_back({start_at(c.effect, c.fitted ? c.time_scale : 1.0, scale, o, data)});
     res.candidates.push_back(c);
     res.candidates.back().fitted = false;
   }
@@ -1126,16 +1137,11 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
 void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
                          const DataScale& scale, const DiagnosisOptions& o) {
   for (const Effect& e : pair.effects) {
-    const auto it = std::find_if(res.candidates.begin(), res.candidates.end(),
-                                 [&](const CandidateResult& c) { return c.fitted && c.effect.kind == e.kind; });
-    if (it == res.candidates.end()) continue;
-    const FitSpace space({e.kind}, scale, false, o, &data);
-    const auto z = space.z_of({e}, {});
-    Eigen::VectorXd start(z.size() + 1);
-    start << z, pair.nominal.time_scale;
-    CandidateResult alone = *it;
-    fit_candidate(alone, {start}, res, problem, data, scale, o);
-    if (alone.errors.rmse_fit_um < it->errors.rmse_fit_um) *it = alone;
+    auto* own = fitted_candidate(res, e.kind);
+    if (!own) continue;
+    CandidateResult alone = *own;
+    fit_candidate(alone, {start_at(e, pair.nominal.time_scale, scale, o, data)}, res, problem, data, scale, o);
+    if (alone.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(alone);
   }
   rank_candidates(res, o);
 }

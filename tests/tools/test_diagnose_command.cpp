@@ -231,17 +231,23 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   EXPECT_NO_THROW((void)control::parse_simulated_rig(toml::parse_file(o.augmented_model_path), o.augmented_model_path));
 }
 
+/// `pvcgel diagnose` on the committed real recordings tests/data/real/NAME/FILES against that directory's
+/// best linear model (linear_model.toml), quietly, the augmented model in a temporary directory.
+DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vector<std::string>& files) {
+  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/" + name + "/";
+  DiagnoseArgs a;
+  a.model = dir + "linear_model.toml";
+  for (const auto& f : files) a.recordings.push_back(dir + f);
+  a.out = (temp_dir("real_" + name) / "augmented.toml").string();
+  a.quiet = true;
+  return run_diagnose(a);
+}
+
 TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsHysteresisAtUnderHalfTheLinearModelsError) {
   // A real piezo stack (tests/data/real/piezo_smarthysteresis, SOURCE.md: +-150 V, 1 Hz; the source documents
   // hysteresis) against its best linear model (fit_linear.py). Before the sine it rests 3 s at 0 V below the
   // loop's centre: remanence, which a loop explains and a lag cannot, so the verdict is not a forced pick.
-  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/piezo_smarthysteresis/";
-  DiagnoseArgs a;
-  a.model = dir + "linear_model.toml";
-  a.recordings = {dir + "piezo_smarthysteresis.csv"};
-  a.out = (temp_dir("real_piezo") / "augmented.toml").string();
-  a.quiet = true;
-  const auto o = run_diagnose(a);
+  const auto o = diagnose_real_recordings("piezo_smarthysteresis", {"piezo_smarthysteresis.csv"});
   const auto& r = o.result;
   EXPECT_EQ(r.verdict, "hysteresis") << o.summary;
   ASSERT_FALSE(r.mixture.empty()) << o.summary;
@@ -259,13 +265,7 @@ TEST(DiagnoseRealRecordings, PiezoP885IsHysteresisAtUnderHalfTheLinearModelsErro
   // amplitude programmes; the source documents hysteresis) against its best linear model (fit_linear.py).
   // The nominal alone fits best half a sample late; with the loop the data take no delay, as an off-line fit
   // with free G found (measured 0.258 um held-out against 0.568 um, 0.45x, at this commit's parent).
-  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/piezo_p885_dbo/";
-  DiagnoseArgs a;
-  a.model = dir + "linear_model.toml";
-  a.recordings = {dir + "piezo_p885_dbo_a.csv", dir + "piezo_p885_dbo_b.csv", dir + "piezo_p885_dbo_c.csv"};
-  a.out = (temp_dir("real_p885") / "augmented.toml").string();
-  a.quiet = true;
-  const auto o = run_diagnose(a);
+  const auto o = diagnose_real_recordings("piezo_p885_dbo", {"piezo_p885_dbo_a.csv", "piezo_p885_dbo_b.csv", "piezo_p885_dbo_c.csv"});
   const auto& r = o.result;
   EXPECT_EQ(r.verdict, "hysteresis") << o.summary;
   ASSERT_FALSE(r.mixture.empty()) << o.summary;
