@@ -26,6 +26,9 @@ std::vector<std::pair<double, double>> creep_branches(const std::array<double, k
 
 namespace {
 
+/// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40.
+constexpr double kGridStepsPerLog = 20.0 / 1.3862943611198906;  // 20 / ln 4
+
 /// The linear block with the effects' LTI parts folded in (creep branches in
 /// parallel, structural mode in series), so one exact ZOH covers it.
 TransferFunction linear_block(const TransferFunction& G, bool creep, const std::array<double, kMaxEffectParams>& pc,
@@ -302,24 +305,37 @@ void AugmentedPlant::apply(double u) noexcept {
 
   const double w = nonlinearity(x);
   if (scale_grid_.size() == 1) {
-    x_ = A_grid_[0] * x_ + B_grid_[0] * w;
+    advance_state(0, 1.0, w);
   } else if (time_scaling_ == EffectKind::asymmetric_dynamics) {
-    const auto i = static_cast<size_t>(time_scale(w));
-    x_ = A_grid_[i] * x_ + B_grid_[i] * w;
+    advance_state(static_cast<size_t>(time_scale(w)), 1.0, w);
   } else {
     // Interpolate between the two neighbouring discretisations (log-spaced grid).
-    const double s = time_scale(w);
-    const double pos = std::clamp(20.0 + 20.0 * std::log(s) / std::log(4.0), 0.0, 39.999);
-    const auto i = static_cast<size_t>(pos);
-    const double t = pos - static_cast<double>(i);
-    Vector next = (1.0 - t) * (A_grid_[i] * x_ + B_grid_[i] * w);
-    next += t * (A_grid_[i + 1] * x_ + B_grid_[i + 1] * w);
-    x_ = next;
+    const double pos = std::clamp(20.0 + std::log(time_scale(w)) * kGridStepsPerLog, 0.0, 39.999);
+    advance_state(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w);
   }
   y_lin_ = C_.dot(x_) + D_ * w;
   y_op_ += op_gain_ * (y_lin_ - y_op_);
   ++sample_;
   y_ = output_stage(y_lin_, sample_);
+}
+
+void AugmentedPlant::advance_state(size_t i, double weight, double w) noexcept {
+  // Hand-written for orders up to kMaxOrder: Eigen's dynamic-size product dispatches to its general
+  // kernel, which cost more than the arithmetic of a 2..5-state step (the diagnosis runs millions).
+  const auto n = x_.size();
+  std::array<double, kMaxOrder> next{};
+  const auto accumulate = [&](size_t g, double share) {
+    const Matrix& A = A_grid_[g];
+    const Vector& B = B_grid_[g];
+    for (Eigen::Index r = 0; r < n; ++r) {
+      double v = B(r) * w;
+      for (Eigen::Index c = 0; c < n; ++c) v += A(r, c) * x_(c);
+      next[static_cast<size_t>(r)] += share * v;
+    }
+  };
+  accumulate(i, weight);
+  if (weight < 1.0) accumulate(i + 1, 1.0 - weight);
+  for (Eigen::Index r = 0; r < n; ++r) x_(r) = next[static_cast<size_t>(r)];
 }
 
 double AugmentedPlant::rest_voltage(double y, double lo, double hi) noexcept {
@@ -335,7 +351,7 @@ double AugmentedPlant::rest_voltage(double y, double lo, double hi) noexcept {
   return v;
 }
 
-std::vector<double> AugmentedPlant::simulate(const std::vector<double>& u, double initial_V) {
+std::vector<double> AugmentedPlant::simulate(std::span<const double> u, double initial_V) {
   std::vector<double> y(u.size());
   if (u.empty()) return y;
   reset_steady_state(initial_V);

@@ -219,7 +219,7 @@ class AugmentedPlant final {
   double rest_voltage(double y_um, double lo_V, double hi_V) noexcept;
 
   /// Output-error simulation: at rest at `initial_V`, then y[k] for every u[k].
-  std::vector<double> simulate(const std::vector<double>& u_V, double initial_V);
+  std::vector<double> simulate(std::span<const double> u_V, double initial_V);
 
  private:
   static constexpr int kMaxOrder = 9;
@@ -233,6 +233,8 @@ class AugmentedPlant final {
   [[nodiscard]] double nonlinearity(double x_V) const noexcept { return f_(std::clamp(x_V, -x_sat_, x_sat_)); }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;
+  /// x <- weight (A_i x + B_i w) + (1 - weight) (A_{i+1} x + B_{i+1} w): one grid entry, or two interpolated.
+  void advance_state(size_t i, double weight, double w) noexcept;
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
 

@@ -208,8 +208,7 @@ class Problem {
       AugmentedPlant plant(mk, io_, s.sample_time_s, e);
       const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s) : initial_V_[r];
       const size_t n = all ? s.u_V.size() : end_[r];
-      std::vector<double> u(s.u_V.begin(), s.u_V.begin() + static_cast<std::ptrdiff_t>(n));
-      out.push_back(plant.simulate(u, v0));
+      out.push_back(plant.simulate(std::span<const double>(s.u_V).first(n), v0));
     }
     return out;
   }
@@ -250,8 +249,14 @@ class Problem {
   }
 
  private:
-  /// Free response of G (time-scaled by k) from each unit state, per recording.
-  const std::vector<std::vector<Eigen::VectorXd>>& modes(double k);
+  /// Per recording: G's free response (time-scaled by k) from each unit state, and the least-squares
+  /// pieces of the projection that do not depend on the simulation, so each projection is one pass.
+  struct Basis {
+    std::vector<Eigen::VectorXd> modes;   ///< free response from each unit state, all samples
+    Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
+    Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
+  };
+  const std::vector<Basis>& basis(double k);
 
   const HammersteinModel& model_;
   const std::vector<Series>& data_;
@@ -264,72 +269,92 @@ class Problem {
   double gain_lo_, gain_hi_;
   size_t n_fit_ = 0;
   int simulations_ = 0;
-  double modes_k_ = NAN;
-  std::vector<std::vector<Eigen::VectorXd>> modes_;
+  // Two time scales cached: a Jacobian's time-scale column alternates with its base point.
+  std::array<double, 2> basis_k_{NAN, NAN};
+  std::array<std::vector<Basis>, 2> basis_;
+  size_t basis_next_ = 0;  ///< the slot the next new time scale replaces
 };
 
-const std::vector<std::vector<Eigen::VectorXd>>& Problem::modes(double k) {
-  if (k == modes_k_) return modes_;
-  modes_k_ = k;
-  modes_.clear();
+const std::vector<Problem::Basis>& Problem::basis(double k) {
+  for (size_t slot = 0; slot < basis_k_.size(); ++slot)
+    if (k == basis_k_[slot]) return basis_[slot];
+  const size_t slot = basis_next_;
+  basis_next_ = (basis_next_ + 1) % basis_k_.size();
+  basis_k_[slot] = k;
+  auto& out = basis_[slot];
+  out.clear();
   StateSpace ss = realize(model_.G, "model.G");
   ss.A /= k;
   ss.B /= k;
-  for (const auto& s : data_) {
+  for (size_t r = 0; r < data_.size(); ++r) {
+    const auto& s = data_[r];
     const auto d = discretize_zoh(ss, s.sample_time_s);
     const auto n = d.A.rows();
     const auto N = static_cast<Eigen::Index>(s.y_um.size());
-    std::vector<Eigen::VectorXd> cols(static_cast<size_t>(n), Eigen::VectorXd(N));
-    for (Eigen::Index i = 0; i < n; ++i) {
-      Eigen::VectorXd x = Eigen::VectorXd::Unit(n, i);
-      for (Eigen::Index t = 0; t < N; ++t) {
-        cols[static_cast<size_t>(i)](t) = d.C.dot(x);
-        x = d.A * x;
+    Basis b;
+    b.modes.assign(static_cast<size_t>(n), Eigen::VectorXd(N));
+    // The modes are a few state-space free responses over every sample: loops, not Eigen's dynamic-size
+    // products (they allocated per sample, and this runs whenever the fit moves G's time scale).
+    Eigen::MatrixXd x = Eigen::MatrixXd::Identity(n, n), next(n, n);  // column i: the state from unit state i
+    for (Eigen::Index t = 0; t < N; ++t) {
+      for (Eigen::Index i = 0; i < n; ++i) {
+        double y = 0.0;
+        for (Eigen::Index j = 0; j < n; ++j) y += d.C(0, j) * x(j, i);
+        b.modes[static_cast<size_t>(i)](t) = y;
       }
+      next.noalias() = d.A * x;
+      x.swap(next);
     }
-    modes_.push_back(std::move(cols));
-  }
-  return modes_;
-}
-
-Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain) {
-  const auto& m = modes(k);
-  const size_t R = data_.size();
-  std::vector<Eigen::VectorXd> u_y(R), u_h(R);
-  double num = 0.0, den = 0.0;
-  for (size_t r = 0; r < R; ++r) {
-    const auto q = static_cast<Eigen::Index>(m[r].size() + 1);
-    Eigen::MatrixXd L = Eigen::MatrixXd::Zero(q, q);
-    Eigen::VectorXd py = Eigen::VectorXd::Zero(q), ph = Eigen::VectorXd::Zero(q), psi(q);
-    double hy = 0.0, hh = 0.0;
+    Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
+    Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1), psi(n + 1);
     for (size_t i = 0; i < end_[r]; ++i) {
       if (held_out_[r][i]) continue;
       psi(0) = 1.0;
-      for (size_t c = 0; c < m[r].size(); ++c) psi(static_cast<Eigen::Index>(c + 1)) = m[r][c](static_cast<Eigen::Index>(i));
-      const double y = data_[r].y_um[i], h = yhat[r][i];
-      L.selfadjointView<Eigen::Lower>().rankUpdate(psi);
-      py += y * psi;
-      ph += h * psi;
-      hy += h * y;
-      hh += h * h;
+      for (Eigen::Index c = 0; c < n; ++c) psi(c + 1) = b.modes[static_cast<size_t>(c)](static_cast<Eigen::Index>(i));
+      for (Eigen::Index c = 0; c <= n; ++c)
+        for (Eigen::Index j = c; j <= n; ++j) L(j, c) += psi(j) * psi(c);
+      py += s.y_um[i] * psi;
     }
     L = L.selfadjointView<Eigen::Lower>();
     L.diagonal().array() += 1e-12 * L.diagonal().maxCoeff() + 1e-300;
-    const auto ldlt = L.ldlt();
-    u_y[r] = ldlt.solve(py);
-    u_h[r] = ldlt.solve(ph);
-    num += hy - ph.dot(u_y[r]);
+    b.gram = L.ldlt();
+    b.data_coefficients = b.gram.solve(py);
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain) {
+  const auto& basis_r = basis(k);
+  const size_t R = data_.size();
+  std::vector<Eigen::VectorXd> u_h(R);
+  double num = 0.0, den = 0.0;
+  for (size_t r = 0; r < R; ++r) {
+    const auto& m = basis_r[r].modes;
+    Eigen::VectorXd ph = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(m.size() + 1));
+    double hy = 0.0, hh = 0.0;
+    for (size_t i = 0; i < end_[r]; ++i) {
+      if (held_out_[r][i]) continue;
+      const double y = data_[r].y_um[i], h = yhat[r][i];
+      ph(0) += h;
+      for (size_t c = 0; c < m.size(); ++c) ph(static_cast<Eigen::Index>(c + 1)) += h * m[c](static_cast<Eigen::Index>(i));
+      hy += h * y;
+      hh += h * h;
+    }
+    u_h[r] = basis_r[r].gram.solve(ph);
+    num += hy - ph.dot(basis_r[r].data_coefficients);
     den += hh - ph.dot(u_h[r]);
   }
   Prediction p;
   p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_lo_, gain_hi_) : 1.0;
   for (size_t r = 0; r < R; ++r) {
-    const Eigen::VectorXd c = u_y[r] - p.gain * u_h[r];
+    const auto& m = basis_r[r].modes;
+    const Eigen::VectorXd c = basis_r[r].data_coefficients - p.gain * u_h[r];
     p.offset_um.push_back(c(0));
     auto& y = yhat[r];
     for (size_t i = 0; i < y.size(); ++i) {
       double v = p.gain * y[i] + c(0);
-      for (size_t j = 0; j < m[r].size(); ++j) v += c(static_cast<Eigen::Index>(j + 1)) * m[r][j](static_cast<Eigen::Index>(i));
+      for (size_t j = 0; j < m.size(); ++j) v += c(static_cast<Eigen::Index>(j + 1)) * m[j](static_cast<Eigen::Index>(i));
       y[i] = v;
     }
   }
