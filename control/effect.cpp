@@ -114,6 +114,7 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       std::vector<double> starts;
       for (double f : {3.0, 8.0, 16.0, 32.0, 64.0, 150.0, 400.0, 1000.0})
         if (f < f_max) starts.push_back(f);
+      if (starts.empty()) starts = rel(f_max, {0.1, 0.3, 0.8});  // sampled below 7.5 Hz (a slow process rig)
       return {{"frequency_Hz", std::min(0.5, 0.1 * f_max), f_max, true, starts},
               // Underdamped enough to peak: an overdamped "mode" low in frequency is a slow lag that passes for creep.
               {"damping_ratio", 0.005, 0.7, true, {0.05, 0.3}},

@@ -861,6 +861,7 @@ std::vector<std::pair<double, Eigen::VectorXd>> coarse_grid(const FitSpace& spac
       }
     grid = std::move(next);
   }
+  if (grid.empty()) throw std::logic_error("internal: a candidate parameter has no starting value");
   for (auto& g : grid) g.first = cost(space.effects(g.second).front());
   std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   return grid;

@@ -161,6 +161,27 @@ TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
   }
 }
 
+TEST(Diagnose, ASaturatingSlowProcessRigSampledAtOneHertzGetsEveryCandidate) {
+  // Below 7.5 Hz sampling no fixed resonance start lies under 0.4x the rate: the grid was empty and
+  // diagnose crashed (found on a 0.25 Hz water-tank recording). Every candidate must still be scored.
+  const HammersteinModel tank{OddPolynomial({2.0}), TransferFunction({0.01}, {1.0, 0.01})};
+  Series s;
+  s.sample_time_s = 1.0;
+  for (int k = 0; k < 1200; ++k) {
+    const double t = k;
+    s.t_s.push_back(t);
+    s.u_V.push_back(3.0 + 1.5 * std::sin(2 * M_PI * t / 400.0) + 0.8 * std::sin(2 * M_PI * t / 97.0 + 1.0));
+  }
+  AugmentedPlant plant(tank, 0, s.sample_time_s, Effect{EffectKind::saturation, {5.5, 0.3}});
+  s.y_um = plant.simulate(s.u_V, s.u_V[0]);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 0.01);
+  for (double& y : s.y_um) y += N(rng);
+  const auto r = diagnose(tank, {s});
+  EXPECT_EQ(r.candidates.size(), kCandidateEffects.size());
+  EXPECT_EQ(r.verdict, "saturation") << r.explanation;
+}
+
 TEST(Diagnose, NonMonotonePolynomialOverTheRecordedRangeIsAConfigError) {
   // n = 3 turns over at ~862 V.
   auto s = recording({}, 0.05);
