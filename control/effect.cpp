@@ -84,8 +84,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
     case EffectKind::none: return {};
     case EffectKind::hysteresis:
       // Play widths from sub-volt loops to loops of a large share of the recorded peak-to-peak; the
-      // spread (default 0: the form of older files) frees the loop's shape.
-      return {{"alpha", 0.0, 1.0, false, {0.005, 0.02, 0.06, 0.3}},
+      // spread (default 0: the form of older files) frees the loop's shape. A negative share is a clockwise
+      // loop (the output leads after a reversal), as a loop acting on the displacement side of a Preisach
+      // model can be; the independent generator's Preisach loops fitted only with it.
+      return {{"alpha", -0.5, 1.0, false, {0.005, 0.02, 0.06, 0.3, -0.02, -0.06}},
               {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, rel(span, {0.01, 0.03, 0.1, 0.3})},
               {"threshold_spread", -0.85, 3.0, false, {-0.6, 0.0, 1.0}, 0.0}};
     case EffectKind::creep:
@@ -143,7 +145,7 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
     case EffectKind::hysteresis:
       return "rate-independent hysteresis: the effective voltage lags the applied voltage after each reversal "
              "(Prandtl-Ishlinskii play operators; the spread of their thresholds sets the loop's shape), so rising "
-             "and falling branches differ";
+             "and falling branches differ (a negative alpha: the displacement leads instead, a clockwise loop)";
     case EffectKind::creep:
       return "viscoelastic creep: a slow relaxation branch keeps the displacement moving after the fast "
              "dynamics have settled";
@@ -263,10 +265,15 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   head_ = 0;
   slew_state_ = u;
   sample_ = 0;
-  // u once through the static input stage, play operators virgin.
+  // u once through the static input stage, each play operator on the chosen branch (virgin: at x).
   double x = u;
   if (has(EffectKind::dead_zone)) x = dead_zone(u, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
-  plays_.fill(x);
+  double lag = 0.0;
+  for (size_t i = 0; i < plays_.size(); ++i) {
+    plays_[i] = x - loop_memory_ * play_r_[i];
+    lag += loop_memory_ * play_r_[i];
+  }
+  if (has(EffectKind::hysteresis)) x -= p(EffectKind::hysteresis)[0] * lag / kPlays;
   const double w = nonlinearity(x);
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;
   const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());

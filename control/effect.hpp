@@ -179,7 +179,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 /// Candidate forms (the generator in generator.hpp uses different ones):
 ///  - hysteresis: Prandtl-Ishlinskii play operators on the voltage,
 ///    x = u - alpha mean_i(u - play_{r_i}(u)), r_i = play_thresholds(R, spread)
-///    (alpha the hysteretic share, R the threshold scale, spread the loop's shape);
+///    (alpha the hysteretic share, R the threshold scale, spread the loop's shape; alpha > 0 is the
+///    usual counter-clockwise loop, the output lagging after a reversal, alpha < 0 a clockwise one);
 ///  - creep: Kelvin-Voigt branches fraction G(0) / (tau s + 1) in parallel with G: one
 ///    branch, or (spread_decades > 0) three with fraction / 3 each at tau 10^(-spread/2, 0, +spread/2),
 ///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
@@ -207,8 +208,12 @@ class AugmentedPlant final {
   AugmentedPlant(const HammersteinModel& model, double io_delay_samples, double sample_time_s, const Effect& effect)
       : AugmentedPlant(model, io_delay_samples, sample_time_s, std::span<const Effect>(&effect, 1)) {}
 
-  /// At rest under constant u (play operators virgin, time zero).
+  /// At rest under constant u (time zero), the play operators on the loop branch set_loop_memory chose.
   void reset_steady_state(double u_V) noexcept;
+  /// The hysteresis memory a rest state starts with: 0 virgin (the default), +1 on the rising branch
+  /// (reached from below: each play r_i under the input), -1 on the falling branch, between: partway.
+  /// A recording that starts after a hold at another level or mid-motion does not start virgin.
+  void set_loop_memory(double branch) noexcept { loop_memory_ = std::clamp(branch, -1.0, 1.0); }
   /// Displacement now (start of the current cycle).
   [[nodiscard]] double output() const noexcept { return y_; }
   /// Hold u for this cycle and advance one sample.
@@ -264,6 +269,7 @@ class AugmentedPlant final {
   std::array<double, kPlays> plays_{};
   std::array<double, kPlays> play_r_{};  ///< the hysteresis effect's play thresholds
   double slew_state_ = 0.0;
+  double loop_memory_ = 0.0;  ///< see set_loop_memory
   long sample_ = 0;
   double y_lin_ = 0.0, y_ = 0.0;
   double y_op_ = 0.0, op_gain_ = 1.0;  ///< operating point (low-passed displacement) for bias-dependent dynamics

@@ -325,6 +325,15 @@ std::string extension_json(const DiagnosisResult& r) {
   return j.str();
 }
 
+/// A fitted loop's start branch per recording (", \"loop_start\": [\"virgin\", \"rising\", ...]"), empty otherwise.
+std::string loop_start_json(const CandidateResult& c) {
+  if (c.loop_memory.empty()) return "";
+  std::string s = ", \"loop_start\": [";
+  for (size_t r = 0; r < c.loop_memory.size(); ++r)
+    s += (r ? ", " : "") + quoted(c.loop_memory[r] > 0.0 ? "rising" : c.loop_memory[r] < 0.0 ? "falling" : "virgin");
+  return s + "]";
+}
+
 std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::string>& recordings,
                            const std::vector<long>& skipped, double cpu) {
   std::ostringstream j;
@@ -335,7 +344,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
     if (!c.fitted) continue;
     const double improvement = r.baseline.rmse_validation_um > 0 ? 1.0 - c.errors.rmse_validation_um / r.baseline.rmse_validation_um : 0.0;
     j << (first ? "\n" : ",\n") << "    {\"name\": " << quoted(std::string(to_string(c.effect.kind)))
-      << ", \"params\": " << effect_params_json(c) << ", \"explanation\": " << quoted(c.explanation)
+      << ", \"params\": " << effect_params_json(c) << loop_start_json(c) << ", \"explanation\": " << quoted(c.explanation)
       << ", \"rmse_fit_um\": " << number_or_null(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << number_or_null(c.errors.rmse_validation_um)
       << ", \"evidence\": {\"coarse_grid_r2\": " << number_or_null(c.evidence_r2) << ", \"validation_rmse_reduction\": " << number_or_null(improvement)
       << ", \"rmse_all_um\": " << number_or_null(c.errors.rmse_um) << ", \"penalised_score\": " << number_or_null(c.score)

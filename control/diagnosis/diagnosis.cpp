@@ -196,6 +196,10 @@ class Problem {
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
   void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
+  /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
+  /// hysteresis see it. Empty: virgin.
+  void set_loop_memory(std::vector<double> m) { loop_memory_ = std::move(m); }
+  [[nodiscard]] const std::vector<double>& loop_memory() const { return loop_memory_; }
   [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
 
   /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
@@ -206,6 +210,7 @@ class Problem {
     for (size_t r = 0; r < data_.size(); ++r) {
       const auto& s = data_[r];
       AugmentedPlant plant(mk, io_, s.sample_time_s, e);
+      if (r < loop_memory_.size()) plant.set_loop_memory(loop_memory_[r]);
       const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s) : initial_V_[r];
       const size_t n = all ? s.u_V.size() : end_[r];
       out.push_back(plant.simulate(std::span<const double>(s.u_V).first(n), v0));
@@ -263,6 +268,7 @@ class Problem {
   const std::vector<std::vector<char>>& held_out_;
   std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
   std::vector<double> initial_V_;
+  std::vector<double> loop_memory_;
   double io_ = 1.0;
   double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
   double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
@@ -824,6 +830,8 @@ void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma,
 
 /// The nominal refit a candidate was fitted jointly with.
 Nominal nominal_of(const CandidateResult& c) { return {c.time_scale, c.poly_shape, c.poly_next}; }
+/// The nuisance-only refit's nominal.
+Nominal nominal_of(const NominalRefit& r) { return {r.time_scale, r.poly_shape, r.poly_next_slope}; }
 
 /// The fitted candidate of kind `k`, or null when that kind was not fitted.
 const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k) {
@@ -938,6 +946,30 @@ Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& fir
   return starts;
 }
 
+/// The branch each recording's loop starts on, one recording at a time (virgin, rising or falling), by the
+/// fit-segment cost at z: a recording that starts after a hold at another level, or mid-motion, starts
+/// part of a loop away from virgin, an offset as large as the loop that no effect parameter can take.
+/// Leaves it set in `problem`; returns whether it changed.
+bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
+  const auto e = space.effects(z);
+  const Nominal k = space.g_scale(z);
+  std::vector<double> memory = problem.loop_memory();
+  memory.resize(recordings, 0.0);
+  const auto before = memory;
+  for (size_t r = 0; r < recordings; ++r) {
+    double best = INFINITY, chosen = memory[r];
+    for (double branch : {0.0, 1.0, -1.0}) {
+      memory[r] = branch;
+      problem.set_loop_memory(memory);
+      const double cost = problem.residual(e, k).squaredNorm();
+      if (cost < best) best = cost, chosen = branch;
+    }
+    memory[r] = chosen;
+  }
+  problem.set_loop_memory(memory);
+  return memory != before;
+}
+
 /// Joint least squares of one candidate (effect parameters and the nominal refit; gain, offset and initial
 /// state by projection) from each of its starts; fills its fitted parameters, errors and score.
 void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& starts, const DiagnosisResult& res,
@@ -961,9 +993,13 @@ void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& start
       z.tail(kNominalParams) =
           spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
       double cost = 0.0;
+      const bool loop = c.effect.kind == EffectKind::hysteresis;
+      if (loop) choose_loop_memory(problem, spaces[v], z, data.size());
       z = fit_staged(problem, spaces[v], z, cost);
+      if (loop && choose_loop_memory(problem, spaces[v], z, data.size())) z = fit_staged(problem, spaces[v], z, cost);
       if (cost < best[v]) {
         best[v] = cost;
+        if (loop) fits[v].loop_memory = problem.loop_memory();
         fits[v].effect = spaces[v].effects(z).front();
         const Nominal k = spaces[v].g_scale(z);
         fits[v].time_scale = k.time_scale;
@@ -974,6 +1010,7 @@ void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& start
   }
   c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
   c.fitted = true;
+  if (c.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c.loop_memory);
   const std::vector<Effect> e{c.effect};
   const auto pred = problem.predict(e, nominal_of(c), true);
   c.gain = pred.gain;
@@ -1251,8 +1288,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
                 const Excess& excess, const DiagnosisOptions& o) {
   const auto alone_y = [&](const CandidateResult* c) {
     if (!c)
-      return problem.predict({}, Nominal(res.nominal_refit.time_scale, res.nominal_refit.poly_shape,
-                                         res.nominal_refit.poly_next_slope), true).y;
+      return problem.predict({}, nominal_of(res.nominal_refit), true).y;
     const std::vector<Effect> e{c->effect};
     return problem.predict(e, nominal_of(*c), true).y;
   };
@@ -1304,13 +1340,24 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
   res.alignment.offset_um = pc.offset_um;
 }
 
+/// Where a fitted loop starts, when not virgin: "; the loop starts on the rising branch in recording 0, ...".
+std::string loop_start_text(const CandidateResult& c) {
+  std::string s;
+  for (size_t r = 0; r < c.loop_memory.size(); ++r)
+    if (c.loop_memory[r] != 0.0)
+      s += (s.empty() ? "; the loop starts on the " : ", ") + std::string(c.loop_memory[r] > 0.0 ? "rising" : "falling") +
+           " branch in recording " + std::to_string(r);
+  return s;
+}
+
 /// The text of every candidate: what it means physically, its fitted parameters and what it does to the held-out error.
 void explain_candidates(DiagnosisResult& res) {
   for (auto& c : res.candidates)
     c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
                     (c.fitted ? " (G time scale " + fmt("%.3g", c.time_scale) + ", gain " + fmt("%.3g", c.gain) +
-                                    "); validation RMSE " + fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) +
-                                    " -> " + fmt("%.3g", c.errors.rmse_validation_um) + " um"
+                                    loop_start_text(c) + "); validation RMSE " +
+                                    fmt("%.3g", res.nominal_refit.errors.rmse_validation_um) + " -> " +
+                                    fmt("%.3g", c.errors.rmse_validation_um) + " um"
                               : " (coarse grid only: not among the leading candidates)");
 }
 

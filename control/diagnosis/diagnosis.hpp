@@ -83,6 +83,9 @@ struct CandidateResult {
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
   double poly_next = 0.0;  ///< f's added term, as its slope share (see DiagnosisOptions::poly_next_tolerance)
+  /// A loop's start per recording (AugmentedPlant::set_loop_memory: 0 virgin, +1 rising, -1 falling branch),
+  /// a nuisance chosen with the loop's fit; empty for the other candidates.
+  std::vector<double> loop_memory;
   int simulations = 0;
   std::string explanation;
 };

@@ -59,6 +59,39 @@ TEST(AugmentedPlant, HysteresisMakesTheFallingBranchHigherThanTheRisingOne) {
   EXPECT_NEAR(none[30000], y0[30000], 1e-12);
 }
 
+TEST(AugmentedPlant, ALoopStartingOnABranchIsTheStateReachedAlongIt) {
+  // f(x) = x and a G that settles within one sample: the output is the effective voltage. A plant that
+  // rests at 300 V on its rising (falling) branch must be the plant that came up (down) to 300 V from
+  // beyond its widest play, and then follow the same loop.
+  const HammersteinModel unit{OddPolynomial({1.0}), TransferFunction({1.0}, {1e-6, 1.0})};
+  for (double alpha : {0.3, -0.3}) {
+    const Effect e{EffectKind::hysteresis, {alpha, 20.0, 1.0}};
+    for (double branch : {1.0, -1.0}) {
+      AugmentedPlant travelled(unit, 0.0, Ts, e), started(unit, 0.0, Ts, e);
+      travelled.reset_steady_state(300.0 - branch * 400.0);
+      for (int k = 0; k <= 400; ++k) travelled.apply(300.0 - branch * 400.0 + branch * k);
+      for (int k = 0; k < 5; ++k) travelled.apply(300.0);
+      started.set_loop_memory(branch);
+      started.reset_steady_state(300.0);
+      started.apply(300.0);
+      EXPECT_NEAR(started.output(), travelled.output(), 1e-9) << "alpha " << alpha << ", branch " << branch;
+      double worst = 0.0;
+      for (double u : voltage(3000)) {
+        travelled.apply(u);
+        started.apply(u);
+        worst = std::max(worst, std::abs(started.output() - travelled.output()));
+      }
+      EXPECT_LT(worst, 1e-9) << "alpha " << alpha << ", branch " << branch;
+    }
+    AugmentedPlant virgin(unit, 0.0, Ts, e), rising(unit, 0.0, Ts, e);
+    virgin.reset_steady_state(300.0);
+    rising.set_loop_memory(1.0);
+    rising.reset_steady_state(300.0);
+    // Rising branch: the plays trail below the input, so the loop lowers (alpha > 0) the effective voltage.
+    EXPECT_LT(alpha * (rising.output() - virgin.output()), -1.0) << "alpha " << alpha;
+  }
+}
+
 TEST(AugmentedPlant, CreepAddsASlowFirstOrderBranch) {
   const double tau = 5.0, fraction = 0.02;
   const auto u = steps(60000, 200.0, 400.0);

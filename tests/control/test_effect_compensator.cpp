@@ -28,12 +28,14 @@ std::vector<double> random_history(std::uint64_t seed, int n) {
 }
 
 TEST(HysteresisOperator, InverseUndoesForwardOverRandomHistoriesWithReversals) {
-  // Every loop shape diagnose fits: narrow, wide, thresholds gathered (-0.85) or spread over decades (3).
+  // Every loop shape diagnose fits: narrow, wide, thresholds gathered (-0.85) or spread over decades (3),
+  // and clockwise loops (alpha < 0: the output leads after a reversal).
   struct Case {
     double alpha, R, spread;
   };
   for (const auto& [alpha, R, spread] : std::vector<Case>{
-           {0.05, 20.0, 0.0}, {0.3, 100.0, 0.0}, {0.85, 5.0, 0.0}, {0.6, 30.0, -0.85}, {0.89, 10.0, 3.0}, {0.4, 300.0, 1.5}}) {
+           {0.05, 20.0, 0.0}, {0.3, 100.0, 0.0}, {0.85, 5.0, 0.0}, {0.6, 30.0, -0.85}, {0.89, 10.0, 3.0}, {0.4, 300.0, 1.5},
+           {-0.1, 20.0, 0.0}, {-0.5, 50.0, 1.5}, {-0.3, 8.0, -0.85}}) {
     HysteresisOperator H(alpha, R, spread);
     H.reset(500.0);
     double worst_x = 0.0, worst_h = 0.0;
