@@ -27,7 +27,7 @@ std::vector<std::pair<double, double>> creep_branches(const std::array<double, k
 namespace {
 
 /// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40.
-constexpr double kGridStepsPerLog = 20.0 / 1.3862943611198906;  // 20 / ln 4
+constexpr double kGridStepsPerLog = 20.0 / (2.0 * std::numbers::ln2);  // 20 / ln 4
 
 /// The linear block with the effects' LTI parts folded in (creep branches in
 /// parallel, structural mode in series), so one exact ZOH covers it.

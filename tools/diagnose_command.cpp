@@ -330,7 +330,7 @@ std::string loop_start_json(const CandidateResult& c) {
   if (c.loop_memory.empty()) return "";
   std::string s = ", \"loop_start\": [";
   for (size_t r = 0; r < c.loop_memory.size(); ++r)
-    s += (r ? ", " : "") + quoted(c.loop_memory[r] > 0.0 ? "rising" : c.loop_memory[r] < 0.0 ? "falling" : "virgin");
+    s += (r ? ", " : "") + quoted(std::string(loop_start_name(c.loop_memory[r])));
   return s + "]";
 }
 

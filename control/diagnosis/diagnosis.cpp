@@ -1345,7 +1345,7 @@ std::string loop_start_text(const CandidateResult& c) {
   std::string s;
   for (size_t r = 0; r < c.loop_memory.size(); ++r)
     if (c.loop_memory[r] != 0.0)
-      s += (s.empty() ? "; the loop starts on the " : ", ") + std::string(c.loop_memory[r] > 0.0 ? "rising" : "falling") +
+      s += (s.empty() ? "; the loop starts on the " : ", ") + std::string(loop_start_name(c.loop_memory[r])) +
            " branch in recording " + std::to_string(r);
   return s;
 }
@@ -1504,6 +1504,10 @@ bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
   const Excess excess(res);
   return excess.base > 0.0 ? excess(e) / excess.base : NAN;
+}
+
+std::string_view loop_start_name(double branch) noexcept {
+  return branch > 0.0 ? "rising" : branch < 0.0 ? "falling" : "virgin";
 }
 
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {

@@ -7,6 +7,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "control/effect.hpp"
@@ -193,6 +194,9 @@ HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vec
 /// on the verdict's yardstick: the held-out data when the mismatch reaches them, else the fit segment (a
 /// verdict needs at most DiagnosisOptions::explained_excess). NaN when the refit leaves no excess.
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
+
+/// The name of a loop's start branch (CandidateResult::loop_memory): "rising", "falling" or "virgin".
+std::string_view loop_start_name(double branch) noexcept;
 
 /// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),
 /// ConfigError on a model that cannot be simulated (unstable G, non-monotone f
