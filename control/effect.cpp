@@ -132,9 +132,12 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
     case EffectKind::bias_dependent_dynamics:
       // beta per reference displacement: the largest recorded one, so beta means the same for a nanometre
       // piezo and a millimetre stroke (a fixed f(500 V) reference left it powerless off the PVC gel's scale).
+      // amplitude_beta: the poles move with how far the displacement swings about its operating point
+      // (the low-passed |y - y_op|), not with where it sits: a gel that stiffens under large motion.
       return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}},
               {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}},
-              {"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true}};
+              {"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true},
+              {"amplitude_beta", -0.7, 3.0, false, {0.0, -0.3, 0.6}, 0.0}};
   }
   return {};
 }
@@ -163,7 +166,8 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
     case EffectKind::drift:
       return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage";
     case EffectKind::bias_dependent_dynamics:
-      return "operating-point-dependent dynamics: the poles move (slow down or speed up) with the displacement";
+      return "operating-point-dependent dynamics: the poles move (slow down or speed up) with the displacement's "
+             "level or with its swing about that level";
   }
   return "";
 }
@@ -244,7 +248,8 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
 
 double AugmentedPlant::time_scale(double w) const noexcept {
   if (time_scaling_ == EffectKind::asymmetric_dynamics) return dc_gain_ * w < y_lin_ ? 1.0 : 0.0;  // grid index
-  return std::clamp(1.0 + p(EffectKind::bias_dependent_dynamics)[0] * y_op_ / y_ref_, 0.25, 4.0);
+  const auto& q = p(EffectKind::bias_dependent_dynamics);
+  return std::clamp(1.0 + (q[0] * y_op_ + q[3] * swing_) / y_ref_, 0.25, 4.0);
 }
 
 double AugmentedPlant::output_stage(double y, long sample) const noexcept {
@@ -279,6 +284,7 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());
   x_ = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
   y_lin_ = y_op_ = C_.dot(x_) + D_ * w;
+  swing_ = 0.0;
   y_ = output_stage(y_lin_, 0);
 }
 
@@ -322,6 +328,7 @@ void AugmentedPlant::apply(double u) noexcept {
     advance_state(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w);
   }
   y_lin_ = C_.dot(x_) + D_ * w;
+  swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
   y_op_ += op_gain_ * (y_lin_ - y_op_);
   ++sample_;
   y_ = output_stage(y_lin_, sample_);

@@ -195,8 +195,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    + rho G(0) M (a fast mode fed by the actuator's force, not filtered by G: modal superposition; rho 0,
 ///    the default, is the series form alone);
 ///  - drift: offset + rate max(t - onset, 0), independent of the input;
-///  - bias_dependent_dynamics: G runs (1 + beta y_op / y_ref) times slower, y_op the displacement
-///    low-passed over the operating-point time constant and y_ref = reference_um (diagnose sets it to the
+///  - bias_dependent_dynamics: G runs (1 + (beta y_op + amplitude_beta y_swing) / y_ref) times slower, y_op the
+///    displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over the
+///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the
 ///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V)).
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
@@ -273,6 +274,7 @@ class AugmentedPlant final {
   long sample_ = 0;
   double y_lin_ = 0.0, y_ = 0.0;
   double y_op_ = 0.0, op_gain_ = 1.0;  ///< operating point (low-passed displacement) for bias-dependent dynamics
+  double swing_ = 0.0;                 ///< low-passed |y - y_op|: the motion's amplitude about it
 };
 
 }  // namespace pvcgel::control

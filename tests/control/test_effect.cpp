@@ -183,6 +183,28 @@ TEST(AugmentedPlant, BiasDependentDynamicsAreSlowerAtHigherDisplacement) {
   EXPECT_LT(y[500], y0[500] - 1.0);        // slower on the way up
 }
 
+TEST(AugmentedPlant, AmplitudeDependentDynamicsSlowALargeSwingAndLeaveAHoldAlone) {
+  // amplitude_beta only: the time scale follows the low-passed swing |y - y_op|, not the level.
+  const double y_ref = 50.0;
+  const Effect e{EffectKind::bias_dependent_dynamics, {0.0, 1.0, y_ref, 2.0}};
+  const auto sine = [](double amplitude_V) {
+    std::vector<double> u(20000);
+    for (size_t k = 0; k < u.size(); ++k) u[k] = 300.0 + amplitude_V * std::sin(2.0 * std::numbers::pi * 1.0 * k * Ts);
+    return u;
+  };
+  const auto lag_share = [&](double amplitude_V) {  // |y - y0| over the nominal's swing, last 5 s
+    const auto u = sine(amplitude_V);
+    const auto y = run(e, u, u[0]), y0 = run({}, u, u[0]);
+    double d = 0.0, s = 0.0;
+    for (size_t k = 15000; k < y.size(); ++k) d += std::abs(y[k] - y0[k]), s += std::abs(y0[k] - y0[15000]);
+    return d / s;
+  };
+  EXPECT_GT(lag_share(200.0), 3.0 * lag_share(20.0));  // slowed much more by the large swing
+  const std::vector<double> hold(5000, 400.0);
+  const auto y = run(e, hold, 400.0), y0 = run({}, hold, 400.0);
+  EXPECT_NEAR(y.back(), y0.back(), 1e-9);  // at rest nothing swings: the nominal plant exactly
+}
+
 TEST(AugmentedPlant, RestVoltageInvertsTheSteadyState) {
   AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::creep, {0.01, 3.0}});
   p.reset_steady_state(321.0);

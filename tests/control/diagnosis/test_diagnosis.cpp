@@ -256,6 +256,31 @@ TEST(NoneTest, FalseAlarmRateOnNominalDataIsWithinItsStatedLevel) {
 namespace pvcgel::control::diagnosis {
 namespace {
 
+TEST(Diagnose, DynamicsThatDependOnTheSwingAreBiasDependentDynamicsWithAnAmplitudeTerm) {
+  // Two recordings about the same bias, one swinging 2.5 times wider: only the amplitude term tells them
+  // apart (a level term sees the same operating point in both).
+  std::vector<Series> recs;
+  for (double scale : {0.4, 1.0}) {
+    Series s = recording({}, 0.0, 3, 15.0);
+    for (double& u : s.u_V) u = 350.0 + scale * (u - 350.0);
+    recs.push_back(s);
+  }
+  double y_max = 0.0;
+  for (const auto& s : recs)
+    for (double y : AugmentedPlant(paper_model(3), 1, Ts, Effect{}).simulate(s.u_V, s.u_V[0])) y_max = std::max(y_max, std::abs(y));
+  const Effect truth{EffectKind::bias_dependent_dynamics, {0.0, 2.0, y_max, 1.5}};
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 0.05);
+  for (auto& s : recs) {
+    s.y_um = AugmentedPlant(paper_model(3), 1, Ts, truth).simulate(s.u_V, s.u_V[0]);
+    for (double& y : s.y_um) y += N(rng);
+  }
+  const auto r = diagnose(paper_model(3), recs);
+  ASSERT_EQ(r.verdict, "bias_dependent_dynamics") << r.explanation;
+  EXPECT_GT(r.effect.p[3], 0.5);  // the swing, not the level, slows G
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.5 * r.nominal_refit.errors.rmse_validation_um);
+}
+
 TEST(Diagnose, BiasDependentDynamicsIsFoundOnAnAmplifierInputActuator) {
   // The paper's plant behind a 0-10 V amplifier input (f rescaled so 10 V does what 500 V did): a
   // reference fixed at f(500 V) would sit thousands of strokes away and leave beta powerless.
