@@ -16,6 +16,7 @@
 #include "control/config/config_parser.hpp"
 #include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"
+#include "tools/parallel_for.hpp"
 #include "tools/recording.hpp"
 #include "tools/text_output.hpp"
 
@@ -392,6 +393,10 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   opt.io_delay_samples = lm.io_delay_samples;
   opt.io_delay_declared = lm.io_delay_declared;
   opt.f_increasing_up_to_V = lm.voltage_max_V;  // the augmented model's f must be increasing over the file's controller range
+  if (const int threads = a.threads > 0 ? a.threads : threads_per_job(1); threads > 1)
+    opt.run_tasks = [threads](std::size_t count, const std::function<void(std::size_t)>& task) {
+      parallel_for(count, threads, task);
+    };
   DiagnoseOutcome out;
   try {
     out.result = diagnose(lm.model, data, opt);
@@ -475,6 +480,8 @@ void add_diagnose_command(CLI::App& app) {
                   "augmented model file (default: DIR/augmented_model.toml with --report, else "
                   "PREFIXaugmented_model.toml with --predict, else REPORT.augmented.toml next to --json)");
   cmd->add_flag("--quiet", args->quiet, "print nothing on success");
+  cmd->add_option("--threads", args->threads, "threads the candidate fits run on (0: every core; the result is the same)")
+      ->check(CLI::Range(0, 256));
   cmd->add_option("recordings", args->recordings, "recordings (daemon format: t_s,u_V,y_um, ...)")
       ->required()->check(CLI::ExistingFile);
   cmd->callback([args] {

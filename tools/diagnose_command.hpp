@@ -22,6 +22,7 @@ struct DiagnoseArgs {
   std::string report;                   ///< directory for report.md and PNG plots
   std::string out;                      ///< augmented model (default: see augmented_model_path)
   bool quiet = false;
+  int threads = 0;                      ///< threads the candidate fits run on (0: every core)
 };
 
 /// A model file read for diagnosis.

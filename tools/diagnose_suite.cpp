@@ -1,18 +1,17 @@
 #include "tools/diagnose_suite.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <mutex>
 #include <stdexcept>
-#include <thread>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
 
 #include "tools/diagnose_command.hpp"
+#include "tools/parallel_for.hpp"
 #include "tools/ident_command.hpp"
 
 namespace pvcgel::tools {
@@ -200,7 +199,7 @@ std::string leaders_text(const DiagnosisResult& d) {
   return text;
 }
 
-CaseOutcome run_case(const std::filesystem::path& dir) {
+CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
   namespace fs = std::filesystem;
   CaseOutcome o;
   DiagnoseArgs a;
@@ -209,6 +208,7 @@ CaseOutcome run_case(const std::filesystem::path& dir) {
     if (e.path().extension() == ".csv") a.recordings.push_back(e.path().string());
   std::sort(a.recordings.begin(), a.recordings.end());
   a.quiet = true;
+  a.threads = threads;
   const auto t0 = std::chrono::steady_clock::now();
   try {
     const auto d = run_diagnose(a).result;
@@ -240,29 +240,24 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
   auto cases = read_labels(fs::path(dir) / "labels.csv");
   if (limit > 0 && static_cast<size_t>(limit) < cases.size()) cases.resize(static_cast<size_t>(limit));
   std::vector<CaseOutcome> out(cases.size());
-  std::atomic<size_t> next{0};
   std::mutex log_mutex;
   DirectorySuiteResult r;
   double time_sum = 0.0;
-  const auto worker = [&] {
-    for (size_t i = next++; i < cases.size(); i = next++) {
-      out[i] = run_case(fs::path(dir) / cases[i].name);
-      const auto& c = cases[i];
-      const auto& o = out[i];
-      const bool single = c.effects.find('+') == std::string::npos;
-      const bool ok = single ? o.verdict == c.effects : names_both(o.mixture, c.effects);
-      char line[768];
-      std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s\n",
-                    c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
-                    ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.error.empty() ? "" : "  error: ",
-                    o.error.c_str());
-      const std::lock_guard lock(log_mutex);
-      log << line << std::flush;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int j = 0; j < std::max(jobs, 1); ++j) pool.emplace_back(worker);
-  for (auto& t : pool) t.join();
+  const int threads = threads_per_job(jobs);  // each case's fits share the cores the other jobs leave
+  parallel_for(cases.size(), jobs, [&](size_t i) {
+    out[i] = run_case(fs::path(dir) / cases[i].name, threads);
+    const auto& c = cases[i];
+    const auto& o = out[i];
+    const bool single = c.effects.find('+') == std::string::npos;
+    const bool ok = single ? o.verdict == c.effects : names_both(o.mixture, c.effects);
+    char line[768];
+    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s\n",
+                  c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
+                  ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.error.empty() ? "" : "  error: ",
+                  o.error.c_str());
+    const std::lock_guard lock(log_mutex);
+    log << line << std::flush;
+  });
   for (size_t i = 0; i < cases.size(); ++i) {
     const auto& c = cases[i];
     const auto& o = out[i];

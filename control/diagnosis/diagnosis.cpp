@@ -236,6 +236,7 @@ class Problem {
     return out;
   }
   [[nodiscard]] int simulations() const { return simulations_; }
+  void add_simulations(int n) { simulations_ += n; }
   /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
   /// as a share of f's mean slope there: c (2n+1) u^(2n) = slope_share f(u) / u.
   /// A negative term is limited so that f (with `shape`) stays increasing up to the controller's range (at
@@ -891,6 +892,24 @@ struct Excess {
   }
 };
 
+/// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
+/// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
+/// counts their simulations in `problem` and returns the copies.
+template <class Task>
+std::vector<Problem> run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
+  std::vector<Problem> copies(count, problem);
+  const std::function<void(size_t)> one = [&](size_t i) { task(i, copies[i]); };
+  if (o.run_tasks && count > 1) {
+    o.run_tasks(count, one);
+  } else {
+    for (size_t i = 0; i < count; ++i) one(i);
+  }
+  int added = 0;
+  for (const auto& c : copies) added += c.simulations() - problem.simulations();
+  problem.add_simulations(added);
+  return copies;
+}
+
 /// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
 /// res.candidates' order.
 using Starts = std::vector<std::vector<Eigen::VectorXd>>;
@@ -908,28 +927,28 @@ Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& sc
 /// grid points of each.
 Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                    const DiagnosisOptions& o, double nuisance_cost) {
-  Starts starts;
-  for (EffectKind kind : kCandidateEffects) {
+  const size_t kinds = kCandidateEffects.size();
+  Starts starts(kinds);
+  std::vector<CandidateResult> evidence(kinds);
+  run_each(kinds, problem, o, [&](size_t i, Problem& own) {
+    const EffectKind kind = kCandidateEffects[i];
     FitSpace space({kind}, scale, false, o, &data);
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
     // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
-    std::vector<Eigen::VectorXd> best;  // each with its time-scale start appended
     for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {
-      const auto grid = coarse_grid(space, [&](const Effect& e) { return problem.residual({&e, 1}, ts).squaredNorm(); });
+      const auto grid = coarse_grid(space, [&](const Effect& e) { return own.residual({&e, 1}, ts).squaredNorm(); });
       if (ts == 1.0) {  // the evidence: at the nominal's time scale, as for every candidate
-        CandidateResult c;
-        c.specs = space.specs;
-        c.evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
-        c.effect = space.effects(grid.front().second).front();
-        res.candidates.push_back(c);
+        evidence[i].specs = space.specs;
+        evidence[i].evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
+        evidence[i].effect = space.effects(grid.front().second).front();
       }
-      for (size_t i = 0; i < std::min<size_t>(grid.size(), 2); ++i) {
-        best.emplace_back(grid[i].second.size() + 1);
-        best.back() << grid[i].second, ts;
+      for (size_t g = 0; g < std::min<size_t>(grid.size(), 2); ++g) {
+        starts[i].emplace_back(grid[g].second.size() + 1);
+        starts[i].back() << grid[g].second, ts;
       }
     }
-    starts.push_back(best);
-  }
+  });
+  res.candidates.insert(res.candidates.end(), evidence.begin(), evidence.end());
   return starts;
 }
 
@@ -1055,8 +1074,13 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
-  for (size_t rank = 0; rank < order.size() && rank < static_cast<size_t>(o.candidates_to_fit); ++rank)
-    fit_candidate(res.candidates[order[rank]], starts[order[rank]], res, problem, data, scale, o);
+  order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
+  const auto fitted = run_each(order.size(), problem, o, [&](size_t rank, Problem& own) {
+    fit_candidate(res.candidates[order[rank]], starts[order[rank]], res, own, data, scale, o);
+  });
+  // What the loop's fit chose stays for the fits that follow (pairs with the loop), as when run in turn.
+  for (size_t rank = 0; rank < order.size(); ++rank)
+    if (res.candidates[order[rank]].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(fitted[rank].loop_memory());
   rank_candidates(res, o);
 }
 
@@ -1174,22 +1198,25 @@ Eigen::VectorXd fit_pair(const DiagnosisResult& res, Problem& problem, const Fit
 /// Fits the best single effect jointly with each of the most promising second effects.
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o) {
-  PairFit best;
   const auto& a = res.candidates.front();
-  for (const Effect& b : second_effects(res, problem, data, scale, o)) {
-    FitSpace space({a.effect.kind, b.kind}, scale, true, o, &data);
-    const auto z = fit_pair(res, problem, space, b, data, scale, o);
-    PairFit p;
+  const auto seconds = second_effects(res, problem, data, scale, o);
+  std::vector<PairFit> fits(seconds.size());
+  run_each(seconds.size(), problem, o, [&](size_t i, Problem& own) {
+    FitSpace space({a.effect.kind, seconds[i].kind}, scale, true, o, &data);
+    const auto z = fit_pair(res, own, space, seconds[i], data, scale, o);
+    PairFit& p = fits[i];
     p.effects = space.effects(z);
     p.nominal = space.g_scale(z);
-    auto pred = problem.predict(p.effects, p.nominal, true);
+    auto pred = own.predict(p.effects, p.nominal, true);
     p.gain = pred.gain;
     p.errors = errors_of(data, pred.y, res.held_out);
     p.y = std::move(pred.y);
     p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
               (1.0 + o.penalty_per_parameter * static_cast<double>(space.specs.size() - 1));
+  });
+  PairFit best;
+  for (auto& p : fits)
     if (p.score < best.score) best = std::move(p);
-  }
   return best;
 }
 

@@ -4,6 +4,8 @@
 /// voltage (output error), locate where and in which regime the residual
 /// exceeds the noise, fit candidate effects and choose by held-out error.
 
+#include <cstddef>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -57,6 +59,10 @@ struct DiagnosisOptions {
                                       ///< runner-up leads when its fit-segment excess MSE is this share lower
   double explained_excess = 0.3;      ///< the chosen effect must leave at most this share of the excess MSE
   int candidates_to_fit = 10;          ///< the leading candidates (by evidence) that are fitted fully
+  /// Runs task(i) for every i below count and returns when all are done; the tasks are independent (each
+  /// has its own simulation state), so they may run at once. Empty: one after another. The diagnosis
+  /// starts no threads itself; `pvcgel diagnose` passes a pool. Results do not depend on it.
+  std::function<void(std::size_t count, const std::function<void(std::size_t)>& task)> run_tasks;
 };
 
 /// A stretch of a recording where the residual exceeds the noise.

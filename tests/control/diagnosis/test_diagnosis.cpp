@@ -44,6 +44,26 @@ TEST(Diagnose, NominalDataWithNoiseIsNone) {
   EXPECT_NEAR(r.baseline.rmse_um, 0.05, 0.005);
 }
 
+TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
+  // run_tasks may run the fits at once; each has its own simulation state, so order cannot matter.
+  const Effect truth{EffectKind::creep, {0.004, 2.5}};
+  const auto data = std::vector<Series>{recording(truth, 0.05)};
+  DiagnosisOptions reversed;
+  int batches = 0;
+  reversed.run_tasks = [&](std::size_t n, const std::function<void(std::size_t)>& task) {
+    ++batches;
+    for (std::size_t i = n; i-- > 0;) task(i);
+  };
+  const auto a = diagnose(paper_model(3), data), b = diagnose(paper_model(3), data, reversed);
+  EXPECT_GT(batches, 1);
+  EXPECT_EQ(a.verdict, b.verdict);
+  EXPECT_EQ(a.effect.p, b.effect.p);
+  EXPECT_EQ(a.fitted.rmse_validation_um, b.fitted.rmse_validation_um);
+  EXPECT_EQ(a.simulations, b.simulations);
+  ASSERT_EQ(a.candidates.size(), b.candidates.size());
+  for (size_t i = 0; i < a.candidates.size(); ++i) EXPECT_EQ(a.candidates[i].effect.p, b.candidates[i].effect.p) << i;
+}
+
 TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
   // Same form as the candidate (a fitter check, not the blind proof): the fit must find it.
   const Effect truth{EffectKind::creep, {0.004, 2.5}};
