@@ -894,9 +894,9 @@ struct Excess {
 
 /// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
 /// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
-/// counts their simulations in `problem` and returns the copies.
+/// counts their simulations in `problem`.
 template <class Task>
-std::vector<Problem> run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
+void run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
   std::vector<Problem> copies(count, problem);
   const std::function<void(size_t)> one = [&](size_t i) { task(i, copies[i]); };
   if (o.run_tasks && count > 1) {
@@ -907,7 +907,6 @@ std::vector<Problem> run_each(size_t count, Problem& problem, const DiagnosisOpt
   int added = 0;
   for (const auto& c : copies) added += c.simulations() - problem.simulations();
   problem.add_simulations(added);
-  return copies;
 }
 
 /// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
@@ -1075,12 +1074,12 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
-  const auto fitted = run_each(order.size(), problem, o, [&](size_t rank, Problem& own) {
+  run_each(order.size(), problem, o, [&](size_t rank, Problem& own) {
     fit_candidate(res.candidates[order[rank]], starts[order[rank]], res, own, data, scale, o);
   });
   // What the loop's fit chose stays for the fits that follow (pairs with the loop), as when run in turn.
-  for (size_t rank = 0; rank < order.size(); ++rank)
-    if (res.candidates[order[rank]].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(fitted[rank].loop_memory());
+  for (size_t i : order)
+    if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
   rank_candidates(res, o);
 }
 
