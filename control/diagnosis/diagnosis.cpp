@@ -1403,7 +1403,9 @@ std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bo
     return lead + "No candidate explains it: the best (" + std::string(to_string(best.effect.kind)) + ") leaves " +
            fmt("%.0f", 100.0 * std::max(excess(best.errors), 0.0) / std::max(excess.base, 1e-300)) +
            "% of the excess residual variance" + runner_up + ".";
-  std::string text = lead + "Best explanation: " + best.explanation;
+  const double removed = 1.0 - std::max(excess(best.errors), 0.0) / std::max(excess.base, 1e-300);
+  std::string text = lead + "Best explanation (removes " + fmt("%.0f", 100.0 * removed) +
+                     "% of the excess held-out variance): " + best.explanation;
   if (pair)
     text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
            fmt("%.3g", res.contribution[0]) + " um^2 of held-out MSE) and " +

@@ -109,7 +109,7 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape,
                            o.result.nominal_refit.poly_next);
   auto poly = truth.f.coefficients();
-  for (double& c : poly) c *= o.result.nominal_refit.gain;
+  for (double& coefficient : poly) coefficient *= o.result.nominal_refit.gain;
   truth.f = control::OddPolynomial(poly);
   ASSERT_EQ(sim_cfg.io_delay_samples, std::lround(o.result.alignment.used_samples));
   AugmentedPlant plant(truth, sim_cfg.io_delay_samples, s.sample_time_s, o.result.effect);

@@ -107,8 +107,9 @@ TEST(Diagnose, FindsAStructuralModeInParallelWithTheSlowGel) {
   // The mode's fast path pulls the nominal model alone to less delay than the declared (and true) one
   // sample; fitted with the mode, the data take the declared sample again, and the analysis runs with it.
   EXPECT_EQ(r.alignment.used_samples, 1.0) << r.alignment.note;
-  if (r.alignment.io_delay_samples < 0.5)
+  if (r.alignment.io_delay_samples < 0.5) {
     EXPECT_NE(r.alignment.note.find("leading candidate (resonance)"), std::string::npos) << r.alignment.note;
+  }
 }
 
 TEST(Diagnose, ALargeCreepIsOneEffectNotCreditedToASecondOneItsPairFitFound) {
