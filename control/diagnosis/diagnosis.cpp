@@ -1,6 +1,7 @@
 #include "control/diagnosis/diagnosis.hpp"
 
 #include <Eigen/Dense>
+#include <boost/math/distributions/students_t.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -1235,45 +1236,61 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
   rank_candidates(res, o);
 }
 
-/// Student t upper quantile at tail p with `df` degrees of freedom (Cornish-Fisher, first two terms).
-double t_upper_quantile(double p, double df) {
-  const double z = normal_upper_quantile(p);
-  return z + (z * z * z + z) / (4.0 * df) + (5.0 * std::pow(z, 5) + 16.0 * z * z * z + 3.0 * z) / (96.0 * df * df);
+/// One block of held-out samples: the mean squared-error reduction and the mean squared difference of
+/// the two predictions (how much the block can tell them apart at all).
+struct HeldOutBlock {
+  double gain_um2 = 0.0, difference_um2 = 0.0;
+};
+
+/// Blocks of contiguous held-out samples: a model error is correlated in time, so single samples would
+/// overstate the evidence; blocks of the localisation window are nearly independent for the dynamics here.
+std::vector<HeldOutBlock> held_out_blocks(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
+                                          const std::vector<std::vector<double>>& y_b,
+                                          const std::vector<std::vector<char>>& held_out, double block_s) {
+  std::vector<HeldOutBlock> blocks;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const size_t len = std::max<size_t>(10, static_cast<size_t>(std::lround(block_s / data[r].sample_time_s)));
+    HeldOutBlock sum;
+    size_t n = 0;
+    for (size_t k = 0; k <= data[r].y_um.size(); ++k) {
+      const bool in = k < data[r].y_um.size() && held_out[r][k];
+      if (in) {
+        const double ea = data[r].y_um[k] - y_a[r][k], eb = data[r].y_um[k] - y_b[r][k];
+        sum.gain_um2 += ea * ea - eb * eb;
+        sum.difference_um2 += (y_a[r][k] - y_b[r][k]) * (y_a[r][k] - y_b[r][k]);
+        ++n;
+      }
+      if (n > 0 && (n == len || (!in && n >= len / 2)))
+        blocks.push_back({sum.gain_um2 / static_cast<double>(n), sum.difference_um2 / static_cast<double>(n)});
+      if (n == len || !in) sum = {}, n = 0;
+    }
+  }
+  return blocks;
 }
 
 }  // namespace
 
 HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
                                  const std::vector<std::vector<double>>& y_b, const std::vector<std::vector<char>>& held_out,
-                                 double block_s, double level) {
-  // Blocks of contiguous held-out samples: a model error is correlated in time, so single samples would
-  // overstate the evidence; blocks of the localisation window are nearly independent for the dynamics here.
-  std::vector<double> means;
-  for (size_t r = 0; r < data.size(); ++r) {
-    const size_t len = std::max<size_t>(10, static_cast<size_t>(std::lround(block_s / data[r].sample_time_s)));
-    double sum = 0.0;
-    size_t n = 0;
-    for (size_t k = 0; k <= data[r].y_um.size(); ++k) {
-      const bool in = k < data[r].y_um.size() && held_out[r][k];
-      if (in) {
-        const double ea = data[r].y_um[k] - y_a[r][k], eb = data[r].y_um[k] - y_b[r][k];
-        sum += ea * ea - eb * eb;
-        ++n;
-      }
-      if (n > 0 && (n == len || (!in && n >= len / 2))) means.push_back(sum / static_cast<double>(n));
-      if (n == len || !in) sum = 0.0, n = 0;
-    }
-  }
+                                 double block_s, double level, double indistinct_um2) {
+  const auto blocks = held_out_blocks(data, y_a, y_b, held_out, block_s);
   HeldOutTest t;
-  t.blocks = static_cast<int>(means.size());
-  if (means.size() < 3) return t;
-  const double nb = static_cast<double>(means.size());
-  t.mean_um2 = std::accumulate(means.begin(), means.end(), 0.0) / nb;
+  std::vector<double> gains;
+  for (const auto& b : blocks) {
+    t.mean_um2 += b.gain_um2 / static_cast<double>(blocks.size());
+    if (b.difference_um2 >= indistinct_um2) gains.push_back(b.gain_um2);
+  }
+  t.blocks = static_cast<int>(gains.size());
+  if (gains.size() < 3) return t;
+  // The t statistic over the blocks that can tell the models apart: a block where both predict the same
+  // adds nothing to the evidence but dilutes its mean (an effect seen only after a few steps).
+  const double nb = static_cast<double>(gains.size());
+  const double mean = std::accumulate(gains.begin(), gains.end(), 0.0) / nb;
   double var = 0.0;
-  for (double m : means) var += (m - t.mean_um2) * (m - t.mean_um2);
+  for (double g : gains) var += (g - mean) * (g - mean);
   const double se = std::sqrt(var / (nb - 1.0) / nb);
-  t.t = se > 0.0 ? t.mean_um2 / se : (t.mean_um2 > 0.0 ? INFINITY : 0.0);
-  t.threshold = t_upper_quantile(level, nb - 1.0);
+  t.t = se > 0.0 ? mean / se : (mean > 0.0 ? INFINITY : 0.0);
+  t.threshold = boost::math::quantile(boost::math::complement(boost::math::students_t(nb - 1.0), level));
   t.significant = t.t > t.threshold;
   return t;
 }
@@ -1322,8 +1339,10 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
   const auto* a1 = fitted_candidate(res, pair.effects[1].kind);
   const double level = o.false_alarm_rate / 2.0;
   // Each effect's contribution: what the held-out MSE loses when it is dropped from the pair.
-  const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level);
-  const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level);
+  // Blocks where dropping the effect moves the prediction by under a tenth of the noise RMS cannot vote.
+  const double indistinct = 0.01 * excess.s2;
+  const auto t0 = held_out_improvement(data, alone_y(a1), pair.y, res.held_out, o.significance_block_s, level, indistinct);
+  const auto t1 = held_out_improvement(data, alone_y(a0), pair.y, res.held_out, o.significance_block_s, level, indistinct);
   const double with_both = excess(pair.errors), c0 = t0.mean_um2, c1 = t1.mean_um2;
   // Material: each removes at least half of what the other leaves alone, and 5% of the noise variance.
   const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : excess.base; };

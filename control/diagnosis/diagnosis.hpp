@@ -185,16 +185,18 @@ TransferFunction time_scaled(const TransferFunction& G, double factor);
 struct HeldOutTest {
   double mean_um2 = 0.0;   ///< mean held-out squared-error reduction (a's MSE minus b's)
   double t = 0.0, threshold = 0.0;
-  int blocks = 0;
+  int blocks = 0;           ///< blocks tested
   bool significant = false;
 };
 
 /// Compares two predictions on the held-out samples: the squared-error differences averaged in blocks
 /// of `block_s` seconds (a model error is correlated in time), their mean against its standard error
-/// (Student t, blocks - 1 degrees of freedom) at one-sided level `level`. Fewer than 3 blocks: not significant.
+/// (Student t, blocks - 1 degrees of freedom) at one-sided level `level`. Blocks where the two predictions
+/// differ by less than `indistinct_um2` (mean square) carry no evidence and are left out of the test (not of
+/// `mean_um2`, which is over every block). Fewer than 3 blocks tested: not significant.
 HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
                                  const std::vector<std::vector<double>>& y_b, const std::vector<std::vector<char>>& held_out,
-                                 double block_s, double level);
+                                 double block_s, double level, double indistinct_um2 = 0.0);
 
 /// The share of the nuisance-only refit's excess (above-noise) MSE that a model with errors `e` still leaves,
 /// on the verdict's yardstick: the held-out data when the mismatch reaches them, else the fit segment (a
