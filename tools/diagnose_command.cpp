@@ -39,6 +39,23 @@ std::string quoted(const std::string& s) {
   return o + "\"";
 }
 
+/// A JSON array of strings: `["a", "b"]`.
+std::string quoted_array(const std::vector<std::string>& names) {
+  std::string o = "[";
+  for (size_t i = 0; i < names.size(); ++i) o += (i ? ", " : "") + quoted(names[i]);
+  return o + "]";
+}
+
+/// What a refit stopped at its tolerance means for the verdict, and what to do about it.
+std::string at_bounds_note(const DiagnosisResult& r) {
+  std::string names;
+  for (size_t i = 0; i < r.nominal_refit.at_bounds.size(); ++i) names += (i ? ", " : "") + r.nominal_refit.at_bounds[i];
+  const std::string which = r.mixture.empty() ? "the nuisance-only refit" : "the nominal refit fitted with the named effects";
+  return which + " stops at its tolerance on " + names + ": the nominal model is further off than the refit may move it" +
+         (r.mixture.empty() ? std::string() : ", so the named effects may stand in for part of that model error") +
+         "; re-identify the nominal model (pvcgel ident) on recordings of this rig";
+}
+
 /// Line of a key in the parsed file (0 when unknown).
 long line_of(const toml::table& root, const std::string& table, const std::string& key) {
   if (const auto* t = root[table].as_table())
@@ -151,6 +168,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   md << "| augmented model | " << number_or_null(r.fitted.rmse_um, "%.4f") << " | " << number_or_null(r.fitted.rmse_fit_um, "%.4f") << " | "
      << number_or_null(r.fitted.rmse_validation_um, "%.4f") << " |\n\nSensor noise estimated from the data: "
      << number_or_null(r.noise_sigma_um, "%.4f") << " um.\n\n";
+  if (!r.nominal_refit.at_bounds.empty()) md << "**Note:** " << at_bounds_note(r) << ".\n\n";
   if (!model_path.empty()) md << "Augmented model (daemon-loadable): `" << model_path << "`\n\n";
   md << "## Where the model disagrees\n\n";
   if (r.mismatch.empty()) md << "No window exceeds the noise.\n\n";
@@ -299,9 +317,7 @@ std::string extension_json(const DiagnosisResult& r) {
     j << (i ? ", " : "") << "{\"name\": " << quoted(std::string(to_string(c.effect.kind))) << ", \"params\": " << effect_params_json(c)
       << ", \"heldout_mse_removed_um2\": " << number_or_null(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";
   }
-  j << "],\n  \"ambiguous_with\": [";
-  for (size_t i = 0; i < r.ambiguous_with.size(); ++i) j << (i ? ", " : "") << quoted(r.ambiguous_with[i]);
-  j << "],\n";
+  j << "],\n  \"ambiguous_with\": " << quoted_array(r.ambiguous_with) << ",\n";
   if (!r.ambiguous_with.empty()) j << "  \"separating_experiment\": " << quoted(r.separating_experiment) << ",\n";
   const auto& a = r.alignment;
   j << "  \"alignment\": {\"io_delay_samples\": " << number_or_null(a.io_delay_samples, "%.3g") << ", \"declared\": "
@@ -317,7 +333,8 @@ std::string extension_json(const DiagnosisResult& r) {
   j << "  \"nominal_refit\": {\"gain\": " << number_or_null(n.gain) << ", \"time_scale\": " << number_or_null(n.time_scale)
     << ", \"poly_shape\": " << number_or_null(n.poly_shape) << ", \"poly_next\": " << number_or_null(n.poly_next)
     << ", \"poly_next_slope\": " << number_or_null(n.poly_next_slope)
-    << ", \"rmse_um\": " << number_or_null(n.errors.rmse_um) << ", \"rmse_validation_um\": " << number_or_null(n.errors.rmse_validation_um) << "},\n";
+    << ", \"rmse_um\": " << number_or_null(n.errors.rmse_um) << ", \"rmse_validation_um\": " << number_or_null(n.errors.rmse_validation_um)
+    << ", \"at_bounds\": " << quoted_array(n.at_bounds) << "},\n";
   const auto& t = r.none_test;
   j << "  \"none_test\": {\"false_alarm_rate\": " << number_or_null(t.false_alarm_rate) << ", \"windows\": " << t.windows
     << ", \"worst_window_ratio\": " << number_or_null(t.worst_window_ratio) << ", \"window_threshold\": " << number_or_null(t.window_threshold)
@@ -415,9 +432,10 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     << (r.alignment.declared ? std::to_string(*r.alignment.declared) + " declared" : std::string("none declared")) << ", "
     << number_or_null(r.alignment.used_samples, "%.3g") << " used; sensor offset " << number_or_null(r.alignment.offset_um.front(), "%.4g") << " um"
     << (r.alignment.note.empty() ? "" : "\n  NOTE: " + r.alignment.note) << "\n";
-  s << "nominal refit (nuisance only): gain " << number_or_null(r.nominal_refit.gain, "%.4g") << ", G time scale "
+  s << "nominal refit (" << (r.mixture.empty() ? "nuisance only" : "with the named effects") << "): gain " << number_or_null(r.nominal_refit.gain, "%.4g") << ", G time scale "
     << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f shape " << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ", f next-term slope share "
-    << number_or_null(r.nominal_refit.poly_next_slope, "%.3g") << ", held-out " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+    << number_or_null(r.nominal_refit.poly_next_slope, "%.3g") << ", held-out (nuisance only) " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
+  if (!r.nominal_refit.at_bounds.empty()) s << "  NOTE: " << at_bounds_note(r) << "\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";

@@ -183,6 +183,7 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
 struct CaseOutcome {
   std::string verdict, mixture, error;
   std::string leaders;  ///< the three best fitted candidates and the share of the excess each leaves
+  std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
 };
 
@@ -217,6 +218,7 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
     o.ratio_aligned = d.fitted.rmse_validation_um / d.aligned.rmse_validation_um;
     o.leaders = leaders_text(d);
+    for (const auto& n : d.nominal_refit.at_bounds) o.at_bounds += (o.at_bounds.empty() ? "" : ",") + n;
   } catch (const std::exception& e) {
     o.verdict = "error";
     o.error = e.what();
@@ -231,6 +233,11 @@ bool names_both(const std::string& mixture, const std::string& effects) {
     return ("+" + mixture + "+").find("+" + n + "+") != std::string::npos;
   };
   return plus != std::string::npos && has(effects.substr(0, plus)) && has(effects.substr(plus + 1));
+}
+
+/// The case's score: the verdict for a single effect or none, both effects named for a mixture.
+bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
+  return c.effects.find('+') == std::string::npos ? o.verdict == c.effects : names_both(o.mixture, c.effects);
 }
 
 }  // namespace
@@ -248,12 +255,11 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     out[i] = run_case(fs::path(dir) / cases[i].name, threads);
     const auto& c = cases[i];
     const auto& o = out[i];
-    const bool single = c.effects.find('+') == std::string::npos;
-    const bool ok = single ? o.verdict == c.effects : names_both(o.mixture, c.effects);
-    char line[768];
-    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s\n",
+    char line[896];
+    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s\n",
                   c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
-                  ok ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.error.empty() ? "" : "  error: ",
+                  scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(),
+                  o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(), o.error.empty() ? "" : "  error: ",
                   o.error.c_str());
     const std::lock_guard lock(log_mutex);
     log << line << std::flush;
@@ -265,6 +271,8 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     r.failed += o.verdict == "error";
     r.max_case_s = std::max(r.max_case_s, o.seconds);
     time_sum += o.seconds;
+    r.refit_at_bound += !o.at_bounds.empty();
+    (o.at_bounds.empty() ? r.refit_inside_right : r.refit_at_bound_right) += scored_right(c, o);
     if (c.effects.find('+') != std::string::npos) {
       ++r.mixture_cases;
       r.mixture_both_named += names_both(o.mixture, c.effects);
@@ -312,11 +320,13 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "mixtures with both effects named %d/%d = %.1f%% (target >= 80%%: ratio %.2f); dominant named %d/%d\n"
                 "held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
                 "  against the nominal with offset and start state fitted: worst %.3f\n"
-                "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n",
+                "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
+                "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n",
                 r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed, r.single_correct, r.single_cases, acc,
                 acc / 95.0, r.false_alarms, r.none_cases, fa, fa / 2.0, r.mixture_both_named, r.mixture_cases, both,
                 both / 80.0, r.mixture_dominant_correct, r.mixture_cases, mean, median, worst, worst / 0.5, worst_aligned, r.mean_case_s,
-                r.max_case_s, r.max_case_s / 30.0);
+                r.max_case_s, r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
+                r.refit_inside_right);
   return s + b;
 }
 

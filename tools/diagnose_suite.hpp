@@ -53,6 +53,9 @@ struct DirectorySuiteResult {
   std::vector<double> ratios_aligned;            ///< the same against the nominal with offset and start state fitted
   double max_case_s = 0.0, mean_case_s = 0.0;
   int cases = 0;
+  /// Cases whose nominal refit stopped at a tolerance (NominalRefit::at_bounds), and how many of them,
+  /// and of the others, were scored right (the verdict for a single effect or none, both named for a mixture).
+  int refit_at_bound = 0, refit_at_bound_right = 0, refit_inside_right = 0;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

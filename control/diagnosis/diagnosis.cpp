@@ -1370,7 +1370,8 @@ void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisO
 
 /// The verdict's fields from the chosen effects, and the nominal refit and offset as fitted jointly with
 /// them (what the augmented model runs).
-void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effect>& chosen, Nominal k) {
+void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effect>& chosen, Nominal k,
+                 const DiagnosisOptions& o) {
   res.mixture = chosen;
   res.effect = chosen.front();
   res.chosen = chosen.front().kind;
@@ -1382,6 +1383,8 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
   res.nominal_refit.poly_shape = k.shape;
   res.nominal_refit.poly_next_slope = k.next;
   res.nominal_refit.poly_next = problem.next_coefficient(k.next, k.shape);
+  const bool loop = std::any_of(chosen.begin(), chosen.end(), [](const Effect& e) { return e.kind == EffectKind::hysteresis; });
+  res.nominal_refit.at_bounds = refit_at_bounds(res.nominal_refit, o, loop);
   res.alignment.offset_um = pc.offset_um;
 }
 
@@ -1452,12 +1455,12 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   const bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok) {
     res.fitted = pair.errors;
-    set_verdict(res, problem, pair.effects, pair.nominal);
+    set_verdict(res, problem, pair.effects, pair.nominal, o);
   } else if (single_ok) {
     res.fitted = best.errors;
     res.contribution = {excess.base - excess(best.errors)};
     find_ambiguous(res, excess, o);
-    set_verdict(res, problem, {best.effect}, nominal_of(best));
+    set_verdict(res, problem, {best.effect}, nominal_of(best), o);
   } else {
     res.verdict = "unexplained";
   }
@@ -1520,7 +1523,8 @@ Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vec
   k = refit_nominal(problem, o);
   auto refit = problem.predict({}, k, true);
   res.nominal_refit = {refit.gain, k.time_scale, k.shape, k.next, problem.next_coefficient(k.next, k.shape),
-                       errors_of(data, refit.y, res.held_out)};
+                       errors_of(data, refit.y, res.held_out), {}};
+  res.nominal_refit.at_bounds = refit_at_bounds(res.nominal_refit, o, false);
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
@@ -1547,6 +1551,21 @@ bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions
 }
 
 }  // namespace
+
+std::vector<std::string> refit_at_bounds(const NominalRefit& r, const DiagnosisOptions& o, bool with_loop) {
+  // Within 1% of the way from the nominal to a bound: a least-squares refit that stops there wanted to go further.
+  const auto at = [](double v, double lo, double hi, double nominal) {
+    return std::abs(v - lo) <= 0.01 * (nominal - lo) || std::abs(hi - v) <= 0.01 * (hi - nominal);
+  };
+  const double g = 1.0 + o.gain_tolerance, t = 1.0 + o.time_scale_tolerance;
+  const double t_lo = with_loop ? std::min(o.hysteresis_time_scale_min, 1.0 / t) : 1.0 / t;
+  std::vector<std::string> names;
+  if (at(r.gain, 1.0 / g, g, 1.0)) names.emplace_back("gain");
+  if (at(r.time_scale, t_lo, t, 1.0)) names.emplace_back("time_scale");
+  if (at(r.poly_shape, 1.0 - o.poly_shape_tolerance, 1.0 + o.poly_shape_tolerance, 1.0)) names.emplace_back("poly_shape");
+  if (at(r.poly_next_slope, -o.poly_next_tolerance, o.poly_next_tolerance, 0.0)) names.emplace_back("poly_next_slope");
+  return names;
+}
 
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
   const Excess excess(res);

@@ -115,6 +115,9 @@ struct NominalRefit {
   double poly_next_slope = 0.0;  ///< f's added odd term: its slope at the largest |u| over f's mean slope there
   double poly_next = 0.0;        ///< its coefficient (of x^(2n+1), n = the nominal's number of terms)
   ModelErrors errors;
+  /// The parameters above that stop at their tolerance (refit_at_bounds), by JSON key: those fitted with
+  /// the named effects when there are any, else the nuisance-only refit's.
+  std::vector<std::string> at_bounds;
 };
 
 /// The statistical `none` test on the residual of the nuisance-only refit.
@@ -165,6 +168,13 @@ std::string describe_regime(const Series& s, size_t begin, size_t end);
 /// Checks a series: uniform, monotone time, finite values, long enough for G's
 /// slowest time constant. @throws std::invalid_argument naming the sample and reason.
 void check_series(const Series& s, const HammersteinModel& model);
+
+/// The parameters of a nominal refit that stop at their tolerance ("gain", "time_scale", "poly_shape",
+/// "poly_next_slope"; `with_loop`: G's time scale may go down to hysteresis_time_scale_min). A refit fitted
+/// with the named effects that stops there says the nominal model is further off than the refit may move
+/// it, and the effects may stand in for part of that model error; a nuisance-only refit may also stop
+/// there because it absorbs what an effect would explain.
+std::vector<std::string> refit_at_bounds(const NominalRefit& refit, const DiagnosisOptions& options, bool with_loop);
 
 /// Simulates `model` (with `effect`) from each recording's u, output error,
 /// from rest at the voltage whose steady state matches the mean of the first

@@ -223,7 +223,7 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   EXPECT_EQ(o.result.verdict, "hysteresis") << o.summary;
   const auto json = read(a.json);
   for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
-                          "\"declared\": null", "\"offset_um\": "})
+                          "\"declared\": null", "\"offset_um\": ", "\"at_bounds\": ["})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
   // The augmented model keeps the user's [controller] table and the sim backend accepts it.
   const auto text = read(o.augmented_model_path);
@@ -301,6 +301,10 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   EXPECT_EQ(r.false_alarms, 0);
   EXPECT_GE(r.single_correct, 5);
   for (double ratio : r.ratios) EXPECT_LE(ratio, 0.5);
+  // The split by the nuisance refit's bounds counts every right case once, on one side.
+  EXPECT_LE(r.refit_at_bound_right, r.refit_at_bound);
+  EXPECT_EQ(r.refit_at_bound_right + r.refit_inside_right,
+            r.single_correct + (r.none_cases - r.false_alarms) + r.mixture_both_named);
 }
 
 }  // namespace

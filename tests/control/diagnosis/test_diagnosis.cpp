@@ -42,6 +42,35 @@ TEST(Diagnose, NominalDataWithNoiseIsNone) {
   EXPECT_EQ(r.verdict, "none");
   EXPECT_TRUE(r.mismatch.empty());
   EXPECT_NEAR(r.baseline.rmse_um, 0.05, 0.005);
+  EXPECT_TRUE(r.nominal_refit.at_bounds.empty());
+}
+
+TEST(NominalRefit, AtBoundsNamesEachParameterAtItsTolerance) {
+  const DiagnosisOptions o;  // gain and G's time scale within a factor 1.25, f's shape 1 +- 0.1, next term +- 0.5
+  NominalRefit inside;
+  inside.gain = 1.2, inside.time_scale = 1.0 / 1.2, inside.poly_shape = 1.09, inside.poly_next_slope = -0.45;
+  EXPECT_TRUE(refit_at_bounds(inside, o, false).empty());
+  NominalRefit stopped;
+  stopped.gain = 1.0 / 1.25, stopped.time_scale = 1.25, stopped.poly_shape = 0.9, stopped.poly_next_slope = 0.5;
+  EXPECT_EQ(refit_at_bounds(stopped, o, false), (std::vector<std::string>{"gain", "time_scale", "poly_shape", "poly_next_slope"}));
+  // With a loop G may get faster, down to hysteresis_time_scale_min: 1/1.25 is then inside.
+  NominalRefit faster;
+  faster.time_scale = 1.0 / 1.25;
+  EXPECT_EQ(refit_at_bounds(faster, o, false), std::vector<std::string>{"time_scale"});
+  EXPECT_TRUE(refit_at_bounds(faster, o, true).empty());
+  faster.time_scale = o.hysteresis_time_scale_min;
+  EXPECT_EQ(refit_at_bounds(faster, o, true), std::vector<std::string>{"time_scale"});
+}
+
+TEST(NominalRefit, ARigBeyondTheGainToleranceStopsTheRefitAtItsBoundAndSaysSo) {
+  // The rig has 1.5x the nominal's gain, beyond the refit's 1.25 (no effect explains a gain): whatever is
+  // named on top of the refit may stand in for that model error, so the diagnosis must say it stopped.
+  Series s = recording({}, 0.05);
+  for (double& y : s.y_um) y *= 1.5;
+  const auto r = diagnose(paper_model(3), {s});
+  const auto& b = r.nominal_refit.at_bounds;
+  EXPECT_NE(std::find(b.begin(), b.end(), "gain"), b.end()) << r.explanation;
+  EXPECT_NE(r.verdict, "none");
 }
 
 TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
