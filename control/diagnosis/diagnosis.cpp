@@ -283,6 +283,25 @@ class Problem {
   size_t basis_next_ = 0;  ///< the slot the next new time scale replaces
 };
 
+/// The free response of a discrete state-space model from each unit initial state, over N samples:
+/// mode i at sample t is (C A^t)_i. One row vector carried through A, n^2 per sample in plain loops:
+/// carrying the n x n state through Eigen's dynamic-size product cost 15% of a slow case's diagnosis.
+std::vector<Eigen::VectorXd> free_response_modes(const StateSpace& d, Eigen::Index N) {
+  const auto n = d.A.rows();
+  std::vector<Eigen::VectorXd> modes(static_cast<size_t>(n), Eigen::VectorXd(N));
+  std::vector<double> row(d.C.data(), d.C.data() + n), next(static_cast<size_t>(n));
+  for (Eigen::Index t = 0; t < N; ++t) {
+    for (Eigen::Index i = 0; i < n; ++i) modes[static_cast<size_t>(i)](t) = row[static_cast<size_t>(i)];
+    for (Eigen::Index j = 0; j < n; ++j) {
+      double v = 0.0;
+      for (Eigen::Index i = 0; i < n; ++i) v += row[static_cast<size_t>(i)] * d.A(i, j);
+      next[static_cast<size_t>(j)] = v;
+    }
+    row.swap(next);
+  }
+  return modes;
+}
+
 const std::vector<Problem::Basis>& Problem::basis(double k) {
   for (size_t slot = 0; slot < basis_k_.size(); ++slot)
     if (k == basis_k_[slot]) return basis_[slot];
@@ -298,21 +317,8 @@ const std::vector<Problem::Basis>& Problem::basis(double k) {
     const auto& s = data_[r];
     const auto d = discretize_zoh(ss, s.sample_time_s);
     const auto n = d.A.rows();
-    const auto N = static_cast<Eigen::Index>(s.y_um.size());
     Basis b;
-    b.modes.assign(static_cast<size_t>(n), Eigen::VectorXd(N));
-    // The modes are a few state-space free responses over every sample: loops, not Eigen's dynamic-size
-    // products (they allocated per sample, and this runs whenever the fit moves G's time scale).
-    Eigen::MatrixXd x = Eigen::MatrixXd::Identity(n, n), next(n, n);  // column i: the state from unit state i
-    for (Eigen::Index t = 0; t < N; ++t) {
-      for (Eigen::Index i = 0; i < n; ++i) {
-        double y = 0.0;
-        for (Eigen::Index j = 0; j < n; ++j) y += d.C(0, j) * x(j, i);
-        b.modes[static_cast<size_t>(i)](t) = y;
-      }
-      next.noalias() = d.A * x;
-      x.swap(next);
-    }
+    b.modes = free_response_modes(d, static_cast<Eigen::Index>(s.y_um.size()));
     Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
     Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1), psi(n + 1);
     for (size_t i = 0; i < end_[r]; ++i) {
