@@ -1,12 +1,13 @@
 #pragma once
 /// @file
-/// printf-style formatting into a string: the one copy used by configuration
+/// printf-style formatting and joining into a string: the one copy used by configuration
 /// messages here and by every `pvcgel` report, so numbers print the same way
 /// everywhere (`%g`, never a 300-digit `std::to_string` of a huge double).
 /// Configuration time only: it allocates.
 
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace pvcgel::control {
 
@@ -16,6 +17,13 @@ std::string format(const char* printf_format, Args... values) {
   char buf[512];
   std::snprintf(buf, sizeof buf, printf_format, values...);
   return buf;
+}
+
+/// `parts` with `separator` between them: "a, b, c".
+inline std::string join(const std::vector<std::string>& parts, const std::string& separator) {
+  std::string out;
+  for (size_t i = 0; i < parts.size(); ++i) out += (i ? separator : std::string()) + parts[i];
+  return out;
 }
 
 }  // namespace pvcgel::control

@@ -14,6 +14,7 @@
 
 #include "control/config_error.hpp"
 #include "control/config/config_parser.hpp"
+#include "control/text_format.hpp"
 #include "daemon/config_file.hpp"
 #include "tools/gnuplot.hpp"
 #include "tools/parallel_for.hpp"
@@ -48,8 +49,7 @@ std::string quoted_array(const std::vector<std::string>& names) {
 
 /// What a refit stopped at its tolerance means for the verdict, and what to do about it.
 std::string at_bounds_note(const DiagnosisResult& r) {
-  std::string names;
-  for (size_t i = 0; i < r.nominal_refit.at_bounds.size(); ++i) names += (i ? ", " : "") + r.nominal_refit.at_bounds[i];
+  const std::string names = join(r.nominal_refit.at_bounds, ", ");
   const std::string which = r.mixture.empty() ? "the nuisance-only refit" : "the nominal refit fitted with the named effects";
   return which + " stops at its tolerance on " + names + ": the nominal model is further off than the refit may move it" +
          (r.mixture.empty() ? std::string() : ", so the named effects may stand in for part of that model error") +
@@ -319,6 +319,11 @@ std::string extension_json(const DiagnosisResult& r) {
   }
   j << "],\n  \"ambiguous_with\": " << quoted_array(r.ambiguous_with) << ",\n";
   if (!r.ambiguous_with.empty()) j << "  \"separating_experiment\": " << quoted(r.separating_experiment) << ",\n";
+  j << "  \"withheld_second_effect\": "
+    << (r.withheld_second.empty() ? std::string("null")
+                                  : "{\"name\": " + quoted(r.withheld_second) +
+                                        ", \"refit_at_bounds\": " + quoted_array(r.withheld_at_bounds) + "}")
+    << ",\n";
   const auto& a = r.alignment;
   j << "  \"alignment\": {\"io_delay_samples\": " << number_or_null(a.io_delay_samples, "%.3g") << ", \"declared\": "
     << (a.declared ? std::to_string(*a.declared) : "null") << ", \"used_samples\": " << number_or_null(a.used_samples, "%.3g")
@@ -437,6 +442,9 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     << number_or_null(r.nominal_refit.poly_next_slope, "%.3g") << ", held-out (nuisance only) " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
   if (!r.nominal_refit.at_bounds.empty()) s << "  NOTE: " << at_bounds_note(r) << "\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
+  if (!r.withheld_second.empty())
+    s << "withheld second effect: " << r.withheld_second << " (significant, but the pair's nominal refit stops at its tolerance on "
+      << join(r.withheld_at_bounds, ", ") << ")\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";
     for (const auto& n : r.ambiguous_with) s << " " << n;

@@ -1,4 +1,5 @@
 #include "tools/diagnose_suite.hpp"
+#include "control/text_format.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -184,6 +185,7 @@ struct CaseOutcome {
   std::string verdict, mixture, error;
   std::string leaders;  ///< the three best fitted candidates and the share of the excess each leaves
   std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
+  std::string withheld;   ///< DiagnosisResult::withheld_second
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
 };
 
@@ -218,7 +220,8 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
     o.ratio_aligned = d.fitted.rmse_validation_um / d.aligned.rmse_validation_um;
     o.leaders = leaders_text(d);
-    for (const auto& n : d.nominal_refit.at_bounds) o.at_bounds += (o.at_bounds.empty() ? "" : ",") + n;
+    o.at_bounds = join(d.nominal_refit.at_bounds, ",");
+    o.withheld = d.withheld_second;
   } catch (const std::exception& e) {
     o.verdict = "error";
     o.error = e.what();
@@ -255,11 +258,12 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     out[i] = run_case(fs::path(dir) / cases[i].name, threads);
     const auto& c = cases[i];
     const auto& o = out[i];
-    char line[896];
-    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s\n",
+    char line[960];
+    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s\n",
                   c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
                   scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(),
-                  o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(), o.error.empty() ? "" : "  error: ",
+                  o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
+                  o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(), o.error.empty() ? "" : "  error: ",
                   o.error.c_str());
     const std::lock_guard lock(log_mutex);
     log << line << std::flush;
@@ -273,6 +277,10 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     time_sum += o.seconds;
     r.refit_at_bound += !o.at_bounds.empty();
     (o.at_bounds.empty() ? r.refit_inside_right : r.refit_at_bound_right) += scored_right(c, o);
+    const bool single_label = c.effects.find('+') == std::string::npos;
+    r.false_second += single_label && o.mixture.find('+') != std::string::npos;
+    r.withheld += !o.withheld.empty();
+    r.withheld_true += !o.withheld.empty() && ("+" + c.effects + "+").find("+" + o.withheld + "+") != std::string::npos;
     if (c.effects.find('+') != std::string::npos) {
       ++r.mixture_cases;
       r.mixture_both_named += names_both(o.mixture, c.effects);
@@ -321,12 +329,13 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
                 "  against the nominal with offset and start state fitted: worst %.3f\n"
                 "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
-                "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n",
+                "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
+                "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n",
                 r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed, r.single_correct, r.single_cases, acc,
                 acc / 95.0, r.false_alarms, r.none_cases, fa, fa / 2.0, r.mixture_both_named, r.mixture_cases, both,
                 both / 80.0, r.mixture_dominant_correct, r.mixture_cases, mean, median, worst, worst / 0.5, worst_aligned, r.mean_case_s,
                 r.max_case_s, r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
-                r.refit_inside_right);
+                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true);
   return s + b;
 }
 

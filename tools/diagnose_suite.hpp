@@ -56,6 +56,9 @@ struct DirectorySuiteResult {
   /// Cases whose nominal refit stopped at a tolerance (NominalRefit::at_bounds), and how many of them,
   /// and of the others, were scored right (the verdict for a single effect or none, both named for a mixture).
   int refit_at_bound = 0, refit_at_bound_right = 0, refit_inside_right = 0;
+  /// Single-effect and none cases that name a second effect (a false one by the labels); cases with a
+  /// second effect withheld (DiagnosisResult::withheld_second), and how many of those the labels hold.
+  int false_second = 0, withheld = 0, withheld_true = 0;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

@@ -45,6 +45,8 @@ struct DiagnosisOptions {
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
+  bool pair_refit_inside = true;      ///< a second effect is named only when the pair's nominal refit stays inside
+                                      ///< its tolerance (else it is reported as withheld)
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
   double validation_fraction = 0.3;   ///< share of every block held out (its end)
@@ -139,6 +141,10 @@ struct DiagnosisResult {
   std::vector<double> contribution;  ///< per mixture element: held-out MSE it removes (um^2)
   std::vector<std::string> ambiguous_with;  ///< effects that explain the held-out data as well as the verdict
   std::string separating_experiment;        ///< what would tell them apart (when ambiguous_with is not empty)
+  /// A second effect significant on held-out data beside the verdict but not named, because the pair's
+  /// nominal refit stops at its tolerance on `withheld_at_bounds` (it may stand in for the nominal's error).
+  std::string withheld_second;
+  std::vector<std::string> withheld_at_bounds;
   Alignment alignment;
   NominalRefit nominal_refit;
   NoneTest none_test;
