@@ -413,11 +413,11 @@ TEST(ModbusBackend, ALateReplyIsAMissedSampleNotGarbage) {
   hal::ModbusBackend backend(cfg);
   double y = 0;
   raw.set_mode(test::RawModbusServer::Mode::late_once);
-  EXPECT_EQ(backend.read_displacement(y), HalStatus::timeout);  // the reply comes at 20 ms
-  // The write waits, and the first frame to arrive is the late answer to the read.
-  std::this_thread::sleep_for(10ms);
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::timeout);  // its reply is held back
+  // The write's request releases it: the first frame the write receives is the late answer to the read
+  // (its own answer, sent with it, is flushed). Scheduled by the server, not by sleeps, so a loaded
+  // machine cannot move the late reply outside the write's wait.
   EXPECT_EQ(backend.write_voltage(0.0), HalStatus::timeout);
-  std::this_thread::sleep_for(10ms);  // the write's own answer arrives meanwhile and is flushed
   EXPECT_EQ(backend.read_displacement(y), HalStatus::ok);
   EXPECT_NEAR(y, 0.1, 1e-9);
   EXPECT_EQ(backend.write_voltage(0.0), HalStatus::ok);

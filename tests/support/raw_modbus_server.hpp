@@ -25,7 +25,9 @@ namespace pvcgel::test {
 class RawModbusServer {
  public:
   /// correct; garbage (malformed frames); exception (server device failure);
-  /// late_once (the next reply correct but 20 ms late, then correct).
+  /// late_once (the next reply correct but held back until the request after it arrives, then sent
+  /// together with that request's own reply in one segment, then correct: a late reply that lands
+  /// inside the next transaction, however the threads are scheduled).
   enum class Mode : int { correct, garbage, exception, late_once };
 
   RawModbusServer() {
@@ -82,6 +84,8 @@ class RawModbusServer {
       const int one = 1;  // as any Modbus server: no Nagle delay on small replies
       ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
       std::uint8_t hdr[7], pdu[260];
+      std::array<std::uint8_t, 600> held{};  // a late_once reply not yet sent
+      size_t held_size = 0;
       unsigned variant = 0;
       while (!stop_ && read_exact(fd, hdr, 7)) {
         const size_t len = static_cast<size_t>(hdr[4] << 8 | hdr[5]);
@@ -108,18 +112,25 @@ class RawModbusServer {
               break;
           }
         } else {
-          if (mode == Mode::late_once) {
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-            mode_.store(Mode::correct);
-          }
           reply(hdr[6], fc, pdu, body);
         }
-        std::array<std::uint8_t, 300> frame;
-        for (size_t i = 0; i < 4; ++i) frame[i] = hdr[i];
-        frame[4] = static_cast<std::uint8_t>(body.size >> 8);
-        frame[5] = static_cast<std::uint8_t>(body.size & 0xFF);
-        for (size_t i = 0; i < body.size; ++i) frame[6 + i] = body.bytes[i];
-        if (::send(fd, frame.data(), 6 + body.size, MSG_NOSIGNAL) < 0) break;
+        // Room for a held reply and this one: both go out in one send.
+        std::array<std::uint8_t, 600> frame;
+        size_t at = held_size;
+        for (size_t i = 0; i < 4; ++i) frame[at + i] = hdr[i];
+        frame[at + 4] = static_cast<std::uint8_t>(body.size >> 8);
+        frame[at + 5] = static_cast<std::uint8_t>(body.size & 0xFF);
+        for (size_t i = 0; i < body.size; ++i) frame[at + 6 + i] = body.bytes[i];
+        at += 6 + body.size;
+        if (mode == Mode::late_once && held_size == 0) {
+          held = frame;  // sent with the next request's reply
+          held_size = at;
+          continue;
+        }
+        for (size_t i = 0; i < held_size; ++i) frame[i] = held[i];
+        if (held_size > 0) mode_.store(Mode::correct);
+        held_size = 0;
+        if (::send(fd, frame.data(), at, MSG_NOSIGNAL) < 0) break;
       }
       ::close(fd);
     }
