@@ -230,12 +230,14 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
   return o;
 }
 
+/// Whether the '+'-separated list `names` holds `name`.
+bool lists(const std::string& names, const std::string& name) {
+  return ("+" + names + "+").find("+" + name + "+") != std::string::npos;
+}
+
 bool names_both(const std::string& mixture, const std::string& effects) {
   const auto plus = effects.find('+');
-  const auto has = [&](const std::string& n) {
-    return ("+" + mixture + "+").find("+" + n + "+") != std::string::npos;
-  };
-  return plus != std::string::npos && has(effects.substr(0, plus)) && has(effects.substr(plus + 1));
+  return plus != std::string::npos && lists(mixture, effects.substr(0, plus)) && lists(mixture, effects.substr(plus + 1));
 }
 
 /// The case's score: the verdict for a single effect or none, both effects named for a mixture.
@@ -280,8 +282,8 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     const bool single_label = c.effects.find('+') == std::string::npos;
     r.false_second += single_label && o.mixture.find('+') != std::string::npos;
     r.withheld += !o.withheld.empty();
-    r.withheld_true += !o.withheld.empty() && ("+" + c.effects + "+").find("+" + o.withheld + "+") != std::string::npos;
-    if (c.effects.find('+') != std::string::npos) {
+    r.withheld_true += !o.withheld.empty() && lists(c.effects, o.withheld);
+    if (!single_label) {
       ++r.mixture_cases;
       r.mixture_both_named += names_both(o.mixture, c.effects);
       r.mixture_dominant_correct += o.verdict == c.dominant;

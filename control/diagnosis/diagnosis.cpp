@@ -1331,15 +1331,16 @@ std::string separating_experiment(EffectKind a, EffectKind b) {
 
 namespace {
 
-/// Where the pair's nominal refit stops at its tolerance (refit_at_bounds).
-std::vector<std::string> pair_refit_at_bounds(const PairFit& pair, const DiagnosisOptions& o) {
+/// Where a nominal refit (projected gain and k) fitted with `effects` stops at its tolerance
+/// (refit_at_bounds; with a loop among them, the loop's lower time-scale bound).
+std::vector<std::string> refit_at_bounds_with(double gain, Nominal k, std::span<const Effect> effects,
+                                              const DiagnosisOptions& o) {
   NominalRefit r;
-  r.gain = pair.gain;
-  r.time_scale = pair.nominal.time_scale;
-  r.poly_shape = pair.nominal.shape;
-  r.poly_next_slope = pair.nominal.next;
-  const bool loop = std::any_of(pair.effects.begin(), pair.effects.end(),
-                                [](const Effect& e) { return e.kind == EffectKind::hysteresis; });
+  r.gain = gain;
+  r.time_scale = k.time_scale;
+  r.poly_shape = k.shape;
+  r.poly_next_slope = k.next;
+  const bool loop = std::any_of(effects.begin(), effects.end(), [](const Effect& e) { return e.kind == EffectKind::hysteresis; });
   return refit_at_bounds(r, o, loop);
 }
 
@@ -1394,7 +1395,7 @@ bool withhold_second(DiagnosisResult& res, const PairFit& pair, const DiagnosisO
   const EffectKind lead = res.candidates.front().effect.kind;
   const EffectKind second = pair.effects[0].kind == lead ? pair.effects[1].kind : pair.effects[0].kind;
   std::vector<std::string> bounds;
-  for (auto& b : pair_refit_at_bounds(pair, o))
+  for (auto& b : refit_at_bounds_with(pair.gain, pair.nominal, pair.effects, o))
     if (can_stand_in_for(second, b)) bounds.push_back(std::move(b));
   if (bounds.empty()) return false;
   res.withheld_second = std::string(to_string(second));
@@ -1431,8 +1432,7 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
   res.nominal_refit.poly_shape = k.shape;
   res.nominal_refit.poly_next_slope = k.next;
   res.nominal_refit.poly_next = problem.next_coefficient(k.next, k.shape);
-  const bool loop = std::any_of(chosen.begin(), chosen.end(), [](const Effect& e) { return e.kind == EffectKind::hysteresis; });
-  res.nominal_refit.at_bounds = refit_at_bounds(res.nominal_refit, o, loop);
+  res.nominal_refit.at_bounds = refit_at_bounds_with(pc.gain, k, chosen, o);
   res.alignment.offset_um = pc.offset_um;
 }
 
