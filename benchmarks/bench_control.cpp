@@ -2,6 +2,9 @@
 //  - controller step (inverse + PID + DOB + feedforward + clamp): median <= 1 us, also
 //    with each effect compensator and with all of them at once (issue 14)
 //  - closed-loop simulation (rig + controller): >= 1,000,000 steps/s on one core
+//  - the diagnosis's plant simulation (AugmentedPlant::simulate, what `pvcgel diagnose` runs thousands of
+//    times per case; issue 11's 30 s per case): ns per sample, with its ratio to the rate before the
+//    fixed-order linear step (kSimulateBeforeNs)
 // Run: ./build/benchmarks/bench_control --benchmark_repetitions=5
 #include <benchmark/benchmark.h>
 
@@ -10,6 +13,7 @@
 #include <vector>
 
 #include "control/closed_loop.hpp"
+#include "control/effect.hpp"
 
 using namespace pvcgel::control;
 
@@ -88,6 +92,41 @@ void BM_ClosedLoopSimulation(benchmark::State& state) {
   state.counters["target_ratio"] = benchmark::Counter(steps / kSimTargetStepsPerSecond, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_ClosedLoopSimulation)->Unit(benchmark::kMillisecond);
+
+/// The nominal plant (argument 0) or it with one effect (argument i: kCandidateEffects[i - 1]) at the middle
+/// of its coarse grid, simulated over 100 s of a 0.5 Hz sine about 300 V at 1 kHz.
+void BM_AugmentedPlantSimulate(benchmark::State& state) {
+  constexpr size_t kSamples = 100000;
+  // ns per sample at 9f564e7 (runtime-order linear step), on this machine, by argument.
+  constexpr std::array<double, kCandidateEffects.size() + 1> kSimulateBeforeNs{25.9, 24.6, 26.0, 23.8, 33.0, 22.8,
+                                                                             26.9, 23.0, 27.8, 22.9, 56.8};
+  std::vector<double> u(kSamples);
+  for (size_t k = 0; k < kSamples; ++k) u[k] = 300.0 + 200.0 * std::sin(2.0 * M_PI * 0.5 * 1e-3 * static_cast<double>(k));
+  std::vector<Effect> effects;
+  std::string label = "nominal";
+  const auto i = static_cast<size_t>(state.range(0));
+  if (i > 0) {
+    Effect e{kCandidateEffects[i - 1], {}};
+    const auto specs = parameter_specs(e.kind, DataScale{.u_min_V = 100.0, .u_max_V = 500.0, .y_abs_um = 120.0});
+    for (size_t j = 0; j < specs.size(); ++j) e.p[j] = specs[j].starts[specs[j].starts.size() / 2];
+    effects.push_back(e);
+    label = std::string(to_string(e.kind));
+  }
+  AugmentedPlant plant(paper_model(2), 1.0, 1e-3, effects);
+  for (auto _ : state) {
+    auto y = plant.simulate(u, 100.0);
+    benchmark::DoNotOptimize(y.data());
+  }
+  const double samples = static_cast<double>(state.iterations() * kSamples);
+  state.SetLabel(label);
+  state.counters["ns_per_sample"] = benchmark::Counter(samples * 1e-9, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  // Ratio to the rate before (below 1 is faster).
+  state.counters["ratio_to_before"] =
+      benchmark::Counter(samples * kSimulateBeforeNs[i] * 1e-9, benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_AugmentedPlantSimulate)
+    ->DenseRange(0, static_cast<int>(kCandidateEffects.size()))
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -234,15 +234,21 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     const auto d = discretize_zoh(scaled, Ts);
     A_grid_.emplace_back(d.A);
     B_grid_.emplace_back(d.B);
-    C_ = d.C;
+    auto& ab = AB_grid_.emplace_back();
+    const auto n = d.A.rows();
+    for (Eigen::Index r = 0; r < n; ++r) {
+      for (Eigen::Index c = 0; c < n; ++c) ab[static_cast<size_t>(r * (n + 1) + c)] = d.A(r, c);
+      ab[static_cast<size_t>(r * (n + 1) + n)] = d.B(r);
+      C_[static_cast<size_t>(r)] = d.C(r);
+    }
     D_ = d.D;
   }
+  linear_step_ = kLinearSteps[static_cast<size_t>(ss.order())];
   dc_gain_ = model.G.dc_gain();
   const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
   if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts / op_tau) : 1.0;
   const double reference_um = time_scaling_ == EffectKind::bias_dependent_dynamics ? p(EffectKind::bias_dependent_dynamics)[2] : 0.0;
   y_ref_ = reference_um > 0.0 ? reference_um : std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
-  x_ = Vector::Zero(ss.order());
   reset_steady_state(0.0);
 }
 
@@ -282,8 +288,13 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   const double w = nonlinearity(x);
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;
   const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());
-  x_ = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
-  y_lin_ = y_op_ = C_.dot(x_) + D_ * w;
+  const Vector rest = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
+  y_lin_ = D_ * w;
+  for (Eigen::Index i = 0; i < rest.size(); ++i) {
+    x_[static_cast<size_t>(i)] = rest(i);
+    y_lin_ += C_[static_cast<size_t>(i)] * rest(i);
+  }
+  y_op_ = y_lin_;
   swing_ = 0.0;
   y_ = output_stage(y_lin_, 0);
 }
@@ -319,39 +330,45 @@ void AugmentedPlant::apply(double u) noexcept {
 
   const double w = nonlinearity(x);
   if (scale_grid_.size() == 1) {
-    advance_state(0, 1.0, w);
+    y_lin_ = (this->*linear_step_)(0, 1.0, w);
   } else if (time_scaling_ == EffectKind::asymmetric_dynamics) {
-    advance_state(static_cast<size_t>(time_scale(w)), 1.0, w);
+    y_lin_ = (this->*linear_step_)(static_cast<size_t>(time_scale(w)), 1.0, w);
   } else {
     // Interpolate between the two neighbouring discretisations (log-spaced grid).
     const double pos = std::clamp(20.0 + std::log(time_scale(w)) * kGridStepsPerLog, 0.0, 39.999);
-    advance_state(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w);
+    y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w);
   }
-  y_lin_ = C_.dot(x_) + D_ * w;
   swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
   y_op_ += op_gain_ * (y_lin_ - y_op_);
   ++sample_;
   y_ = output_stage(y_lin_, sample_);
 }
 
-void AugmentedPlant::advance_state(size_t i, double weight, double w) noexcept {
-  // Hand-written for orders up to kMaxOrder: Eigen's dynamic-size product dispatches to its general
-  // kernel, which cost more than the arithmetic of a 2..5-state step (the diagnosis runs millions).
-  const auto n = x_.size();
-  std::array<double, kMaxOrder> next{};
-  const auto accumulate = [&](size_t g, double share) {
-    const Matrix& A = A_grid_[g];
-    const Vector& B = B_grid_[g];
-    for (Eigen::Index r = 0; r < n; ++r) {
-      double v = B(r) * w;
-      for (Eigen::Index c = 0; c < n; ++c) v += A(r, c) * x_(c);
+template <int N>
+double AugmentedPlant::linear_step(size_t i, double weight, double w) noexcept {
+  std::array<double, N> next{};
+  const auto accumulate = [&](const std::array<double, kMaxOrder*(kMaxOrder + 1)>& ab, double share) {
+    for (int r = 0; r < N; ++r) {
+      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w;
+      for (int c = 0; c < N; ++c) v += ab[static_cast<size_t>(r * (N + 1) + c)] * x_[static_cast<size_t>(c)];
       next[static_cast<size_t>(r)] += share * v;
     }
   };
-  accumulate(i, weight);
-  if (weight < 1.0) accumulate(i + 1, 1.0 - weight);
-  for (Eigen::Index r = 0; r < n; ++r) x_(r) = next[static_cast<size_t>(r)];
+  accumulate(AB_grid_[i], weight);
+  if (weight < 1.0) accumulate(AB_grid_[i + 1], 1.0 - weight);
+  double y = D_ * w;
+  for (int r = 0; r < N; ++r) {
+    x_[static_cast<size_t>(r)] = next[static_cast<size_t>(r)];
+    y += C_[static_cast<size_t>(r)] * next[static_cast<size_t>(r)];
+  }
+  return y;
 }
+
+const std::array<AugmentedPlant::LinearStep, AugmentedPlant::kMaxOrder + 1> AugmentedPlant::kLinearSteps{
+    &AugmentedPlant::linear_step<0>, &AugmentedPlant::linear_step<1>, &AugmentedPlant::linear_step<2>,
+    &AugmentedPlant::linear_step<3>, &AugmentedPlant::linear_step<4>, &AugmentedPlant::linear_step<5>,
+    &AugmentedPlant::linear_step<6>, &AugmentedPlant::linear_step<7>, &AugmentedPlant::linear_step<8>,
+    &AugmentedPlant::linear_step<9>};
 
 double AugmentedPlant::rest_voltage(double y, double lo, double hi) noexcept {
   reset_steady_state(lo);

@@ -234,13 +234,17 @@ class AugmentedPlant final {
   static constexpr int kDelayLine = kDelayLineSamples;
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxOrder, 1>;
-  using RowVector = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxOrder>;
 
   [[nodiscard]] double nonlinearity(double x_V) const noexcept { return f_(std::clamp(x_V, -x_sat_, x_sat_)); }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;
-  /// x <- weight (A_i x + B_i w) + (1 - weight) (A_{i+1} x + B_{i+1} w): one grid entry, or two interpolated.
-  void advance_state(size_t i, double weight, double w) noexcept;
+  /// x <- weight (A_i x + B_i w) + (1 - weight) (A_{i+1} x + B_{i+1} w): one grid entry, or two
+  /// interpolated; returns C x + D w. For the linear block's order N, chosen once at construction (with N a
+  /// constant the compiler unrolls the step; a runtime order cost the diagnosis half its simulation time).
+  template <int N>
+  double linear_step(size_t i, double weight, double w) noexcept;
+  using LinearStep = double (AugmentedPlant::*)(size_t, double, double) noexcept;
+  static const std::array<LinearStep, kMaxOrder + 1> kLinearSteps;
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
 
@@ -260,10 +264,13 @@ class AugmentedPlant final {
   // a grid of time scales when the effect changes the time scale.
   std::vector<Matrix> A_grid_;
   std::vector<Vector> B_grid_;
+  /// Per grid entry, [A | B] row-major, as linear_step reads it.
+  std::vector<std::array<double, kMaxOrder*(kMaxOrder + 1)>> AB_grid_;
   std::vector<double> scale_grid_;
-  RowVector C_;
+  std::array<double, kMaxOrder> C_{};
   double D_ = 0.0;
-  Vector x_;
+  std::array<double, kMaxOrder> x_{};
+  LinearStep linear_step_ = nullptr;
   double dc_gain_ = 0.0, y_ref_ = 1.0;
   std::array<double, kDelayLine> delay_line_{};
   int head_ = 0;

@@ -166,6 +166,22 @@ double rest_from_output(AugmentedPlant& plant, const Series& s) {
   return plant.rest_voltage(y0, *lo - margin, *hi + margin);
 }
 
+/// The fit samples of a held-out mask as [begin, end) ranges, so sums over them run on contiguous memory.
+std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_out) {
+  std::vector<std::pair<size_t, size_t>> out;
+  for (size_t k = 0; k < held_out.size(); ++k) {
+    if (held_out[k]) continue;
+    if (out.empty() || out.back().second != k) out.emplace_back(k, k);
+    out.back().second = k + 1;
+  }
+  return out;
+}
+
+/// Samples [first, last) of a series as an Eigen vector view.
+Eigen::Map<const Eigen::VectorXd> segment(const std::vector<double>& v, size_t first, size_t last) {
+  return {v.data() + first, static_cast<Eigen::Index>(last - first)};
+}
+
 /// A model's prediction after the nuisance projection.
 struct Prediction {
   std::vector<std::vector<double>> y;  ///< per recording, all simulated samples
@@ -182,13 +198,11 @@ class Problem {
  public:
   Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
           double gain_tolerance, double f_increasing_up_to_V)
-      : model_(m), data_(d), held_out_(held_out), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
+      : model_(m), data_(d), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
-      size_t last = 0;
-      for (size_t k = 0; k < mask.size(); ++k)
-        if (!mask[k]) last = k + 1;
-      end_.push_back(last);
+      fit_ranges_.push_back(fit_ranges(mask));
+      end_.push_back(fit_ranges_.back().empty() ? 0 : fit_ranges_.back().back().second);
     }
     initial_V_.assign(d.size(), NAN);
     for (const auto& s : d)
@@ -233,8 +247,11 @@ class Problem {
     Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
     Eigen::Index j = 0;
     for (size_t r = 0; r < data_.size(); ++r)
-      for (size_t i = 0; i < end_[r]; ++i)
-        if (!held_out_[r][i]) out(j++) = data_[r].y_um[i] - p.y[r][i];
+      for (const auto& [first, last] : fit_ranges_[r]) {
+        const auto len = static_cast<Eigen::Index>(last - first);
+        out.segment(j, len) = segment(data_[r].y_um, first, last) - segment(p.y[r], first, last);
+        j += len;
+      }
     return out;
   }
   [[nodiscard]] int simulations() const { return simulations_; }
@@ -268,7 +285,7 @@ class Problem {
 
   const HammersteinModel& model_;
   const std::vector<Series>& data_;
-  const std::vector<std::vector<char>>& held_out_;
+  std::vector<std::vector<std::pair<size_t, size_t>>> fit_ranges_;  ///< per recording: [begin, end) of fit samples
   std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
   std::vector<double> initial_V_;
   std::vector<double> loop_memory_;
@@ -320,15 +337,21 @@ const std::vector<Problem::Basis>& Problem::basis(double k) {
     const auto n = d.A.rows();
     Basis b;
     b.modes = free_response_modes(d, static_cast<Eigen::Index>(s.y_um.size()));
+    // psi = (1, modes): its Gram matrix and psi' y over the fit samples.
     Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
-    Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1), psi(n + 1);
-    for (size_t i = 0; i < end_[r]; ++i) {
-      if (held_out_[r][i]) continue;
-      psi(0) = 1.0;
-      for (Eigen::Index c = 0; c < n; ++c) psi(c + 1) = b.modes[static_cast<size_t>(c)](static_cast<Eigen::Index>(i));
-      for (Eigen::Index c = 0; c <= n; ++c)
-        for (Eigen::Index j = c; j <= n; ++j) L(j, c) += psi(j) * psi(c);
-      py += s.y_um[i] * psi;
+    Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
+    for (const auto& [first, last] : fit_ranges_[r]) {
+      const auto len = static_cast<Eigen::Index>(last - first);
+      const auto y = segment(s.y_um, first, last);
+      L(0, 0) += static_cast<double>(len);
+      py(0) += y.sum();
+      for (Eigen::Index c = 0; c < n; ++c) {
+        const auto mc = b.modes[static_cast<size_t>(c)].segment(static_cast<Eigen::Index>(first), len);
+        L(c + 1, 0) += mc.sum();
+        py(c + 1) += mc.dot(y);
+        for (Eigen::Index j = c; j < n; ++j)
+          L(j + 1, c + 1) += mc.dot(b.modes[static_cast<size_t>(j)].segment(static_cast<Eigen::Index>(first), len));
+      }
     }
     L = L.selfadjointView<Eigen::Lower>();
     L.diagonal().array() += 1e-12 * L.diagonal().maxCoeff() + 1e-300;
@@ -348,13 +371,13 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     const auto& m = basis_r[r].modes;
     Eigen::VectorXd ph = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(m.size() + 1));
     double hy = 0.0, hh = 0.0;
-    for (size_t i = 0; i < end_[r]; ++i) {
-      if (held_out_[r][i]) continue;
-      const double y = data_[r].y_um[i], h = yhat[r][i];
-      ph(0) += h;
-      for (size_t c = 0; c < m.size(); ++c) ph(static_cast<Eigen::Index>(c + 1)) += h * m[c](static_cast<Eigen::Index>(i));
-      hy += h * y;
-      hh += h * h;
+    for (const auto& [first, last] : fit_ranges_[r]) {
+      const auto h = segment(yhat[r], first, last);
+      ph(0) += h.sum();
+      for (size_t c = 0; c < m.size(); ++c)
+        ph(static_cast<Eigen::Index>(c + 1)) += h.dot(m[c].segment(static_cast<Eigen::Index>(first), h.size()));
+      hy += h.dot(segment(data_[r].y_um, first, last));
+      hh += h.squaredNorm();
     }
     u_h[r] = basis_r[r].gram.solve(ph);
     num += hy - ph.dot(basis_r[r].data_coefficients);
@@ -366,12 +389,9 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     const auto& m = basis_r[r].modes;
     const Eigen::VectorXd c = basis_r[r].data_coefficients - p.gain * u_h[r];
     p.offset_um.push_back(c(0));
-    auto& y = yhat[r];
-    for (size_t i = 0; i < y.size(); ++i) {
-      double v = p.gain * y[i] + c(0);
-      for (size_t j = 0; j < m.size(); ++j) v += c(static_cast<Eigen::Index>(j + 1)) * m[j](static_cast<Eigen::Index>(i));
-      y[i] = v;
-    }
+    Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
+    y = (p.gain * y).array() + c(0);
+    for (size_t j = 0; j < m.size(); ++j) y += c(static_cast<Eigen::Index>(j + 1)) * m[j].head(y.size());
   }
   p.y = std::move(yhat);
   return p;
