@@ -301,6 +301,26 @@ class Problem {
   size_t basis_next_ = 0;  ///< the slot the next new time scale replaces
 };
 
+/// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
+/// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
+/// counts their simulations in `problem`. A copy lives only while its task runs (each holds G's
+/// free-response modes of every recording).
+template <class Task>
+void run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
+  std::vector<int> added(count, 0);
+  const std::function<void(size_t)> one = [&](size_t i) {
+    Problem own = problem;
+    task(i, own);
+    added[i] = own.simulations() - problem.simulations();
+  };
+  if (o.run_tasks && count > 1) {
+    o.run_tasks(count, one);
+  } else {
+    for (size_t i = 0; i < count; ++i) one(i);
+  }
+  problem.add_simulations(std::accumulate(added.begin(), added.end(), 0));
+}
+
 /// The free response of a discrete state-space model from each unit initial state, over N samples:
 /// mode i at sample t is (C A^t)_i. One row vector carried through A, n^2 per sample in plain loops:
 /// carrying the n x n state through Eigen's dynamic-size product cost 15% of a slow case's diagnosis.
@@ -755,11 +775,11 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
   // like a sample of delay, and a delay estimated without the refit leaves that sample to be blamed on
   // a `delay` effect later.
   const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
-  std::vector<double> mse;
-  for (int d = 0; d <= max_d; ++d) {
-    p.set_delay(d);
-    mse.push_back(fit_mse(p, {}, refit_nominal(p, o)));
-  }
+  std::vector<double> mse(static_cast<size_t>(max_d) + 1);
+  run_each(mse.size(), p, o, [&](size_t d, Problem& own) {
+    own.set_delay(static_cast<double>(d));
+    mse[d] = fit_mse(own, {}, refit_nominal(own, o));
+  });
   const auto best = static_cast<int>(std::min_element(mse.begin(), mse.end()) - mse.begin());
   a.io_delay_samples = best;
   if (best > 0 && best < max_d) {
@@ -920,23 +940,6 @@ struct Excess {
   }
 };
 
-/// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
-/// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
-/// counts their simulations in `problem`.
-template <class Task>
-void run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
-  std::vector<Problem> copies(count, problem);
-  const std::function<void(size_t)> one = [&](size_t i) { task(i, copies[i]); };
-  if (o.run_tasks && count > 1) {
-    o.run_tasks(count, one);
-  } else {
-    for (size_t i = 0; i < count; ++i) one(i);
-  }
-  int added = 0;
-  for (const auto& c : copies) added += c.simulations() - problem.simulations();
-  problem.add_simulations(added);
-}
-
 /// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
 /// res.candidates' order.
 using Starts = std::vector<std::vector<Eigen::VectorXd>>;
@@ -1016,45 +1019,55 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
   return memory != before;
 }
 
-/// Joint least squares of one candidate (effect parameters and the nominal refit; gain, offset and initial
-/// state by projection) from each of its starts; fills its fitted parameters, errors and score.
-void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& starts, const DiagnosisResult& res,
-                   Problem& problem, const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
-  const FitSpace space({c.effect.kind}, scale, true, o, &data);
-  // A loop is fitted with the earlier shape (threshold_spread 0) too; the free shape is kept only when it
-  // fits clearly better: on short or closed-loop data it otherwise bends to the fit segment alone.
-  std::vector<FitSpace> spaces{space};
-  if (c.effect.kind == EffectKind::hysteresis) {
-    spaces.push_back(space);
+/// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
+/// (threshold_spread 0), kept only when the free shape does not fit clearly better: on short or
+/// closed-loop data the free shape otherwise bends to the fit segment alone.
+std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, const DiagnosisOptions& o,
+                                       const std::vector<Series>& data) {
+  std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
+  if (kind == EffectKind::hysteresis) {
+    spaces.push_back(spaces.front());
     auto& spread = spaces.back().specs[2];
     spread.lower = spread.upper = 0.0;
     spread.fixed = true;
   }
-  std::vector<double> best(spaces.size(), INFINITY);
-  std::vector<CandidateResult> fits(spaces.size(), c);
-  for (size_t v = 0; v < spaces.size(); ++v) {
-    for (const auto& s0 : starts) {
-      Eigen::VectorXd z(static_cast<Eigen::Index>(spaces[v].specs.size()));
-      z.head(s0.size() - 1) = s0.head(s0.size() - 1);
-      z.tail(kNominalParams) =
-          spaces[v].z_of({spaces[v].effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
-      double cost = 0.0;
-      const bool loop = c.effect.kind == EffectKind::hysteresis;
-      if (loop) choose_loop_memory(problem, spaces[v], z, data.size());
-      z = fit_staged(problem, spaces[v], z, cost);
-      if (loop && choose_loop_memory(problem, spaces[v], z, data.size())) z = fit_staged(problem, spaces[v], z, cost);
-      if (cost < best[v]) {
-        best[v] = cost;
-        if (loop) fits[v].loop_memory = problem.loop_memory();
-        fits[v].effect = spaces[v].effects(z).front();
-        const Nominal k = spaces[v].g_scale(z);
-        fits[v].time_scale = k.time_scale;
-        fits[v].poly_shape = k.shape;
-        fits[v].poly_next = k.next;
-      }
-    }
-  }
-  c = spaces.size() > 1 && best[0] > (1.0 - o.hysteresis_shape_min_gain) * best[1] ? fits[1] : fits[0];
+  return spaces;
+}
+
+/// One joint fit of a candidate (effect parameters and the nominal refit; gain, offset and initial state by
+/// projection) in one of its spaces from one start: the cost it reaches, where, and for a loop the branch
+/// each recording starts on (chosen before the fit and once more after it).
+struct StartFit {
+  double cost = INFINITY;
+  Eigen::VectorXd z;
+  std::vector<double> loop_memory;
+};
+
+StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& problem, size_t recordings) {
+  StartFit out;
+  Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
+  z.head(s0.size() - 1) = s0.head(s0.size() - 1);
+  z.tail(kNominalParams) = space.z_of({space.effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
+  const bool loop = space.kinds.front() == EffectKind::hysteresis;
+  if (loop) choose_loop_memory(problem, space, z, recordings);
+  z = fit_staged(problem, space, z, out.cost);
+  if (loop && choose_loop_memory(problem, space, z, recordings)) z = fit_staged(problem, space, z, out.cost);
+  out.z = std::move(z);
+  if (loop) out.loop_memory = problem.loop_memory();
+  return out;
+}
+
+/// Fills a candidate from the best fit in each of its spaces (candidate_spaces): parameters, errors, score.
+void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
+                      const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                      const DiagnosisOptions& o) {
+  const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - o.hysteresis_shape_min_gain) * best[1].cost ? 1 : 0;
+  c.effect = spaces[v].effects(best[v].z).front();
+  const Nominal k = spaces[v].g_scale(best[v].z);
+  c.time_scale = k.time_scale;
+  c.poly_shape = k.shape;
+  c.poly_next = k.next;
+  c.loop_memory = best[v].loop_memory;
   c.fitted = true;
   if (c.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c.loop_memory);
   const std::vector<Effect> e{c.effect};
@@ -1063,6 +1076,38 @@ void fit_candidate(CandidateResult& c, const std::vector<Eigen::VectorXd>& start
   c.errors = errors_of(data, pred.y, res.held_out);
   c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
             (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
+}
+
+/// Fits candidates `which` of res.candidates, each from its starts: every (candidate, space, start) is a
+/// task of its own (a loop's eight fits cost as much as the other candidates together, so whole candidates
+/// balanced badly over threads), the loop's first. Each task starts from `problem`'s loop memory, so the
+/// result does not depend on the order or the threads.
+void fit_each(DiagnosisResult& res, const std::vector<size_t>& which, const Starts& starts, Problem& problem,
+              const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  struct Task {
+    size_t candidate, space, start;
+  };
+  std::vector<std::vector<FitSpace>> spaces;
+  std::vector<Task> tasks;
+  for (size_t w = 0; w < which.size(); ++w) {
+    spaces.push_back(candidate_spaces(res.candidates[which[w]].effect.kind, scale, o, data));
+    for (size_t v = 0; v < spaces.back().size(); ++v)
+      for (size_t i = 0; i < starts[w].size(); ++i) tasks.push_back({w, v, i});
+  }
+  std::stable_partition(tasks.begin(), tasks.end(), [&](const Task& t) { return spaces[t.candidate].size() > 1; });
+  std::vector<StartFit> fits(tasks.size());
+  run_each(tasks.size(), problem, o, [&](size_t i, Problem& own) {
+    const Task& t = tasks[i];
+    fits[i] = fit_from(spaces[t.candidate][t.space], starts[t.candidate][t.start], own, data.size());
+  });
+  std::vector<std::vector<StartFit>> best(which.size());
+  for (size_t w = 0; w < which.size(); ++w) best[w].resize(spaces[w].size());
+  for (size_t i = 0; i < tasks.size(); ++i) {  // the first start wins ties
+    auto& b = best[tasks[i].candidate][tasks[i].space];
+    if (b.z.size() == 0 || fits[i].cost < b.cost) b = std::move(fits[i]);
+  }
+  for (size_t w = 0; w < which.size(); ++w)
+    finish_candidate(res.candidates[which[w]], spaces[w], best[w], res, problem, data, o);
 }
 
 /// When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
@@ -1102,10 +1147,10 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
-  run_each(order.size(), problem, o, [&](size_t rank, Problem& own) {
-    fit_candidate(res.candidates[order[rank]], starts[order[rank]], res, own, data, scale, o);
-  });
-  // What the loop's fit chose stays for the fits that follow (pairs with the loop), as when run in turn.
+  Starts ordered;
+  for (size_t i : order) ordered.push_back(starts[i]);
+  fit_each(res, order, ordered, problem, data, scale, o);
+  // What the loop's fit chose stays for the fits that follow (pairs with the loop).
   for (size_t i : order)
     if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
   rank_candidates(res, o);
@@ -1196,12 +1241,17 @@ std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem,
   return out;
 }
 
-/// The leader `a` and a second effect `b` fitted jointly from two starts: the leader as fitted alone, and
-/// the leader re-gridded beside `b`'s own fit (a leader fitted alone has absorbed part of the second
-/// effect, and the pair's optimum may sit far from it: a hysteresis + creep rig's loop at 0.4x its alpha).
-Eigen::VectorXd fit_pair(const DiagnosisResult& res, Problem& problem, const FitSpace& space, const Effect& b,
-                         const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+/// The starts of the leader `a` and a second effect `b` fitted jointly: the leader as fitted alone (start 0),
+/// and the leader re-gridded beside `b`'s own fit (start 1: a leader fitted alone has absorbed part of the
+/// second effect, and the pair's optimum may sit far from it: a hysteresis + creep rig's loop at 0.4x its
+/// alpha).
+constexpr size_t kPairStarts = 2;
+
+Eigen::VectorXd pair_start(size_t start, const DiagnosisResult& res, Problem& problem, const FitSpace& space,
+                           const Effect& b, const std::vector<Series>& data, const DataScale& scale,
+                           const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
+  if (start == 0) return space.z_of({a.effect, b}, nominal_of(a));
   const auto* fitted_b = fitted_candidate(res, b.kind);
   const Nominal kb = fitted_b ? nominal_of(*fitted_b) : Nominal{};
   const FitSpace lead({a.effect.kind}, scale, false, o, &data);
@@ -1209,41 +1259,39 @@ Eigen::VectorXd fit_pair(const DiagnosisResult& res, Problem& problem, const Fit
     const std::vector<Effect> e{x, b};
     return problem.residual(e, kb).squaredNorm();
   });
-  const std::pair<std::vector<Effect>, Nominal> starts[] = {
-      {{a.effect, b}, nominal_of(a)},
-      {{lead.effects(regrid.front().second).front(), b}, kb}};
-  double cost = INFINITY;
-  Eigen::VectorXd z;
-  for (const auto& [start, k] : starts) {
-    double c = 0.0;
-    auto zz = fit_staged(problem, space, space.z_of(start, k), c);
-    if (c < cost) cost = c, z = std::move(zz);
-  }
-  return z;
+  return space.z_of({lead.effects(regrid.front().second).front(), b}, kb);
 }
 
-/// Fits the best single effect jointly with each of the most promising second effects.
+/// Fits the best single effect jointly with each of the most promising second effects, every (second
+/// effect, start) a task of its own; each pair keeps its better start (the first on a tie).
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
   const auto seconds = second_effects(res, problem, data, scale, o);
-  std::vector<PairFit> fits(seconds.size());
-  run_each(seconds.size(), problem, o, [&](size_t i, Problem& own) {
-    FitSpace space({a.effect.kind, seconds[i].kind}, scale, true, o, &data);
-    const auto z = fit_pair(res, own, space, seconds[i], data, scale, o);
-    PairFit& p = fits[i];
-    p.effects = space.effects(z);
-    p.nominal = space.g_scale(z);
-    auto pred = own.predict(p.effects, p.nominal, true);
+  std::vector<FitSpace> spaces;
+  for (const auto& b : seconds) spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
+  std::vector<std::pair<double, Eigen::VectorXd>> fits(seconds.size() * kPairStarts);
+  run_each(fits.size(), problem, o, [&](size_t t, Problem& own) {
+    const size_t i = t / kPairStarts;
+    auto& [cost, z] = fits[t];
+    z = fit_staged(own, spaces[i], pair_start(t % kPairStarts, res, own, spaces[i], seconds[i], data, scale, o), cost);
+  });
+  PairFit best;
+  for (size_t i = 0; i < seconds.size(); ++i) {
+    const auto* chosen = &fits[i * kPairStarts];
+    for (size_t j = 1; j < kPairStarts; ++j)
+      if (fits[i * kPairStarts + j].first < chosen->first) chosen = &fits[i * kPairStarts + j];
+    PairFit p;
+    p.effects = spaces[i].effects(chosen->second);
+    p.nominal = spaces[i].g_scale(chosen->second);
+    auto pred = problem.predict(p.effects, p.nominal, true);
     p.gain = pred.gain;
     p.errors = errors_of(data, pred.y, res.held_out);
     p.y = std::move(pred.y);
     p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
-              (1.0 + o.penalty_per_parameter * static_cast<double>(space.specs.size() - 1));
-  });
-  PairFit best;
-  for (auto& p : fits)
+              (1.0 + o.penalty_per_parameter * static_cast<double>(spaces[i].specs.size() - 1));
     if (p.score < best.score) best = std::move(p);
+  }
   return best;
 }
 
@@ -1253,13 +1301,22 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
 /// effect is never credited with its partner's better fit. Re-ranks the candidates.
 void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
                          const DataScale& scale, const DiagnosisOptions& o) {
-  for (const Effect& e : pair.effects) {
-    auto* own = fitted_candidate(res, e.kind);
-    if (!own) continue;
-    CandidateResult alone = *own;
-    fit_candidate(alone, {start_at(e, pair.nominal.time_scale, scale, o, data)}, res, problem, data, scale, o);
-    if (alone.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(alone);
+  DiagnosisResult alone;  // the members' refits, beside their own fits
+  alone.held_out = res.held_out;
+  Starts starts;
+  for (const Effect& e : pair.effects)
+    if (const auto* own = fitted_candidate(res, e.kind)) {
+      alone.candidates.push_back(*own);
+      starts.push_back({start_at(e, pair.nominal.time_scale, scale, o, data)});
+    }
+  std::vector<size_t> all(alone.candidates.size());
+  std::iota(all.begin(), all.end(), 0);
+  fit_each(alone, all, starts, problem, data, scale, o);
+  for (auto& c : alone.candidates) {
+    auto* own = fitted_candidate(res, c.effect.kind);
+    if (c.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(c);
   }
+  if (const auto* loop = fitted_candidate(res, EffectKind::hysteresis)) problem.set_loop_memory(loop->loop_memory);
   rank_candidates(res, o);
 }
 
@@ -1373,6 +1430,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
     if (!c)
       return problem.predict({}, nominal_of(res.nominal_refit), true).y;
     const std::vector<Effect> e{c->effect};
+    if (c->effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c->loop_memory);
     return problem.predict(e, nominal_of(*c), true).y;
   };
   const auto* a0 = fitted_candidate(res, pair.effects[0].kind);
