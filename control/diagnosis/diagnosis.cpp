@@ -1174,18 +1174,22 @@ std::optional<int> leader_delay(const DiagnosisResult& res, Problem& problem, co
   const FitSpace space({lead.effect.kind}, scale, true, o, &data);
   const std::vector<Effect> e{lead.effect};
   const double at_used = fit_mse(problem, e, nominal_of(lead));
+  std::vector<int> delays;
+  for (int d : {used - 1, used + 1, declared.value_or(used)})
+    if (d >= 0 && d <= most && d != used && std::find(delays.begin(), delays.end(), d) == delays.end()) delays.push_back(d);
+  std::vector<double> mse(delays.size());
+  run_each(delays.size(), problem, o, [&](size_t i, Problem& own) {
+    own.set_delay(delays[i]);
+    double cost = 0.0;
+    const auto z = fit_staged(own, space, space.z_of(e, nominal_of(lead)), cost);
+    mse[i] = fit_mse(own, space.effects(z), space.g_scale(z));
+  });
   double best = at_used;
   std::optional<int> better;
-  for (int d : {used - 1, used + 1, declared.value_or(used)}) {
-    if (d < 0 || d > most || d == used || d == better) continue;
-    problem.set_delay(d);
-    double cost = 0.0;
-    const auto z = fit_staged(problem, space, space.z_of(e, nominal_of(lead)), cost);
-    const double mse = fit_mse(problem, space.effects(z), space.g_scale(z));
-    const double gain = at_used - mse;
-    if (mse < best && gain > o.tie_fit_gain * (at_used - s2) && gain > o.ambiguity_margin * s2) best = mse, better = d;
+  for (size_t i = 0; i < delays.size(); ++i) {
+    const double gain = at_used - mse[i];
+    if (mse[i] < best && gain > o.tie_fit_gain * (at_used - s2) && gain > o.ambiguity_margin * s2) best = mse[i], better = delays[i];
   }
-  problem.set_delay(used);
   return better;
 }
 
