@@ -74,9 +74,10 @@ TEST(NominalRefit, ARigBeyondTheGainToleranceStopsTheRefitAtItsBoundAndSaysSo) {
 }
 
 TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
-  // run_tasks may run the fits at once; each has its own simulation state, so order cannot matter.
+  // run_tasks may run the fits at once; each has its own simulation state, so order cannot matter. Two
+  // recordings: each start of a loop's fit chooses every recording's branch from the same memory.
   const Effect truth{EffectKind::creep, {0.004, 2.5}};
-  const auto data = std::vector<Series>{recording(truth, 0.05)};
+  const auto data = std::vector<Series>{recording(truth, 0.05), recording(truth, 0.05, 7)};
   DiagnosisOptions reversed;
   int batches = 0;
   reversed.run_tasks = [&](std::size_t n, const std::function<void(std::size_t)>& task) {
@@ -90,7 +91,10 @@ TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
   EXPECT_EQ(a.fitted.rmse_validation_um, b.fitted.rmse_validation_um);
   EXPECT_EQ(a.simulations, b.simulations);
   ASSERT_EQ(a.candidates.size(), b.candidates.size());
-  for (size_t i = 0; i < a.candidates.size(); ++i) EXPECT_EQ(a.candidates[i].effect.p, b.candidates[i].effect.p) << i;
+  for (size_t i = 0; i < a.candidates.size(); ++i) {
+    EXPECT_EQ(a.candidates[i].effect.p, b.candidates[i].effect.p) << i;
+    EXPECT_EQ(a.candidates[i].loop_memory, b.candidates[i].loop_memory) << i;
+  }
 }
 
 TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
