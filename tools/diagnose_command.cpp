@@ -2,7 +2,10 @@
 
 #include <toml++/toml.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -10,6 +13,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <mutex>
 #include <sstream>
 
 #include "control/config_error.hpp"
@@ -391,6 +395,26 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
   return j.str();
 }
 
+namespace {
+
+/// Progress on stderr, with the seconds since the diagnosis started: on a terminal one line per stage,
+/// rewritten as its tasks end; otherwise (a log) a line when a stage ends.
+std::function<void(std::string_view, std::size_t, std::size_t)> progress_printer() {
+  const bool terminal = isatty(STDERR_FILENO) != 0;
+  const auto start = std::chrono::steady_clock::now();
+  auto lock = std::make_shared<std::mutex>();
+  return [terminal, start, lock](std::string_view stage, std::size_t done, std::size_t total) {
+    if (!terminal && done < total) return;
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const std::lock_guard hold(*lock);
+    std::fprintf(stderr, "%sdiagnose: %.*s %zu/%zu (%.1f s)%s", terminal ? "\r\033[K" : "", static_cast<int>(stage.size()),
+                 stage.data(), done, total, s, !terminal || done == total ? "\n" : "");
+    std::fflush(stderr);
+  };
+}
+
+}  // namespace
+
 DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   const double cpu0 = process_cpu_s();
   const LoadedModel lm = load_model(a.model);
@@ -419,6 +443,7 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     opt.run_tasks = [threads](std::size_t count, const std::function<void(std::size_t)>& task) {
       parallel_for(count, threads, task);
     };
+  if (a.progress) opt.progress = progress_printer();
   DiagnoseOutcome out;
   try {
     out.result = diagnose(lm.model, data, opt);
@@ -511,6 +536,7 @@ void add_diagnose_command(CLI::App& app) {
   cmd->add_option("recordings", args->recordings, "recordings (daemon format: t_s,u_V,y_um, ...)")
       ->required()->check(CLI::ExistingFile);
   cmd->callback([args] {
+    args->progress = !args->quiet;
     const auto out = run_diagnose(*args);
     if (!args->quiet) {
       std::cout << out.summary;

@@ -23,6 +23,7 @@ struct DiagnoseArgs {
   std::string out;                      ///< augmented model (default: see augmented_model_path)
   bool quiet = false;
   int threads = 0;                      ///< threads the candidate fits run on (0: every core)
+  bool progress = false;                ///< each stage's progress on stderr (the command line: unless --quiet)
 };
 
 /// A model file read for diagnosis.

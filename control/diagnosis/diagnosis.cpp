@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <boost/math/distributions/students_t.hpp>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -303,15 +304,18 @@ class Problem {
 
 /// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
 /// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
-/// counts their simulations in `problem`. A copy lives only while its task runs (each holds G's
-/// free-response modes of every recording).
+/// counts their simulations in `problem` and tells o.progress of each task done in `stage`. A copy lives
+/// only while its task runs (each holds G's free-response modes of every recording).
 template <class Task>
-void run_each(size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
+void run_each(std::string_view stage, size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
   std::vector<int> added(count, 0);
+  std::atomic<size_t> done{0};
   const std::function<void(size_t)> one = [&](size_t i) {
     Problem own = problem;
     task(i, own);
     added[i] = own.simulations() - problem.simulations();
+    const size_t d = ++done;
+    if (o.progress) o.progress(stage, d, count);
   };
   if (o.run_tasks && count > 1) {
     o.run_tasks(count, one);
@@ -776,7 +780,7 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
   // a `delay` effect later.
   const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
   std::vector<double> mse(static_cast<size_t>(max_d) + 1);
-  run_each(mse.size(), p, o, [&](size_t d, Problem& own) {
+  run_each("delay search", mse.size(), p, o, [&](size_t d, Problem& own) {
     own.set_delay(static_cast<double>(d));
     mse[d] = fit_mse(own, {}, refit_nominal(own, o));
   });
@@ -960,7 +964,7 @@ Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Ser
   const size_t kinds = kCandidateEffects.size();
   Starts starts(kinds);
   std::vector<CandidateResult> evidence(kinds);
-  run_each(kinds, problem, o, [&](size_t i, Problem& own) {
+  run_each("coarse grids", kinds, problem, o, [&](size_t i, Problem& own) {
     const EffectKind kind = kCandidateEffects[i];
     FitSpace space({kind}, scale, false, o, &data);
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
@@ -1082,8 +1086,8 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
 /// task of its own (a loop's eight fits cost as much as the other candidates together, so whole candidates
 /// balanced badly over threads), the loop's first. Each task starts from `problem`'s loop memory, so the
 /// result does not depend on the order or the threads.
-void fit_each(DiagnosisResult& res, const std::vector<size_t>& which, const Starts& starts, Problem& problem,
-              const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+void fit_each(std::string_view stage, DiagnosisResult& res, const std::vector<size_t>& which, const Starts& starts,
+              Problem& problem, const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
   struct Task {
     size_t candidate, space, start;
   };
@@ -1096,7 +1100,7 @@ void fit_each(DiagnosisResult& res, const std::vector<size_t>& which, const Star
   }
   std::stable_partition(tasks.begin(), tasks.end(), [&](const Task& t) { return spaces[t.candidate].size() > 1; });
   std::vector<StartFit> fits(tasks.size());
-  run_each(tasks.size(), problem, o, [&](size_t i, Problem& own) {
+  run_each(stage, tasks.size(), problem, o, [&](size_t i, Problem& own) {
     const Task& t = tasks[i];
     fits[i] = fit_from(spaces[t.candidate][t.space], starts[t.candidate][t.start], own, data.size());
   });
@@ -1149,7 +1153,7 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
   Starts ordered;
   for (size_t i : order) ordered.push_back(starts[i]);
-  fit_each(res, order, ordered, problem, data, scale, o);
+  fit_each(warm ? "candidate fits at the leader's delay" : "candidate fits", res, order, ordered, problem, data, scale, o);
   // What the loop's fit chose stays for the fits that follow (pairs with the loop).
   for (size_t i : order)
     if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
@@ -1178,7 +1182,7 @@ std::optional<int> leader_delay(const DiagnosisResult& res, Problem& problem, co
   for (int d : {used - 1, used + 1, declared.value_or(used)})
     if (d >= 0 && d <= most && d != used && std::find(delays.begin(), delays.end(), d) == delays.end()) delays.push_back(d);
   std::vector<double> mse(delays.size());
-  run_each(delays.size(), problem, o, [&](size_t i, Problem& own) {
+  run_each("leader at other delays", delays.size(), problem, o, [&](size_t i, Problem& own) {
     own.set_delay(delays[i]);
     double cost = 0.0;
     const auto z = fit_staged(own, space, space.z_of(e, nominal_of(lead)), cost);
@@ -1275,7 +1279,7 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
   std::vector<FitSpace> spaces;
   for (const auto& b : seconds) spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
   std::vector<std::pair<double, Eigen::VectorXd>> fits(seconds.size() * kPairStarts);
-  run_each(fits.size(), problem, o, [&](size_t t, Problem& own) {
+  run_each("pair fits", fits.size(), problem, o, [&](size_t t, Problem& own) {
     const size_t i = t / kPairStarts;
     auto& [cost, z] = fits[t];
     z = fit_staged(own, spaces[i], pair_start(t % kPairStarts, res, own, spaces[i], seconds[i], data, scale, o), cost);
@@ -1315,7 +1319,7 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
     }
   std::vector<size_t> all(alone.candidates.size());
   std::iota(all.begin(), all.end(), 0);
-  fit_each(alone, all, starts, problem, data, scale, o);
+  fit_each("pair members refitted alone", alone, all, starts, problem, data, scale, o);
   for (auto& c : alone.candidates) {
     auto* own = fitted_candidate(res, c.effect.kind);
     if (c.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(c);

@@ -65,6 +65,9 @@ struct DiagnosisOptions {
   /// has its own simulation state), so they may run at once. Empty: one after another. The diagnosis
   /// starts no threads itself; `pvcgel diagnose` passes a pool. Results do not depend on it.
   std::function<void(std::size_t count, const std::function<void(std::size_t)>& task)> run_tasks;
+  /// Told after each task of a stage ends: the stage ("candidate fits", ...), the tasks done and the
+  /// stage's task count. Called from the tasks, so from run_tasks' threads at once. Empty: not told.
+  std::function<void(std::string_view stage, std::size_t done, std::size_t total)> progress;
 };
 
 /// A stretch of a recording where the residual exceeds the noise.

@@ -69,8 +69,15 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   a.json = (dir / "report.json").string();
   a.predict = (dir / "pred").string();
   a.quiet = true;
+  a.progress = true;
+  testing::internal::CaptureStderr();
   const auto o = run_diagnose(a);
+  const std::string progress = testing::internal::GetCapturedStderr();
   EXPECT_EQ(o.result.verdict, "creep") << o.summary;
+  // Not a terminal: a line as each stage ends, with its task count and the seconds since the start.
+  EXPECT_NE(progress.find("diagnose: coarse grids 10/10 ("), std::string::npos) << progress;
+  EXPECT_NE(progress.find("diagnose: candidate fits "), std::string::npos) << progress;
+  EXPECT_EQ(progress.find('\r'), std::string::npos) << progress;
   EXPECT_NE(o.summary.find("3 rows with non-finite t_s/u_V/y_um skipped"), std::string::npos) << o.summary;
 
   const auto json = read(a.json);

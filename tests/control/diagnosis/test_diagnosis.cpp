@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <random>
 #include <stdexcept>
+#include <tuple>
 
 #include "control/config_error.hpp"
 
@@ -95,6 +97,27 @@ TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
     EXPECT_EQ(a.candidates[i].effect.p, b.candidates[i].effect.p) << i;
     EXPECT_EQ(a.candidates[i].loop_memory, b.candidates[i].loop_memory) << i;
   }
+}
+
+TEST(Diagnose, ProgressReportsEveryStageUntilItsLastTask) {
+  const Effect truth{EffectKind::creep, {0.004, 2.5}};
+  DiagnosisOptions o;
+  std::vector<std::tuple<std::string, size_t, size_t>> told;
+  o.progress = [&](std::string_view stage, size_t done, size_t total) { told.emplace_back(stage, done, total); };
+  const auto r = diagnose(paper_model(3), {recording(truth, 0.05)}, o);
+  ASSERT_EQ(r.verdict, "creep") << r.explanation;
+  std::map<std::string, size_t> last, totals;
+  for (const auto& [stage, done, total] : told) {
+    EXPECT_GE(total, 1u) << stage;
+    EXPECT_EQ(done, last[stage] % total + 1) << stage;  // 1, 2, .. total within a stage (again in a second pass)
+    last[stage] = done;
+    totals[stage] = total;
+  }
+  for (const char* stage : {"delay search", "coarse grids", "candidate fits"}) {
+    ASSERT_TRUE(totals.count(stage)) << stage;
+    EXPECT_EQ(last[stage], totals[stage]) << stage;
+  }
+  EXPECT_EQ(totals["coarse grids"], kCandidateEffects.size());
 }
 
 TEST(Diagnose, RecoversTheParametersOfItsOwnCreepForm) {
