@@ -227,13 +227,16 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   } else {
     scale_grid_ = {1.0};
   }
-  for (double s : scale_grid_) {
+  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
+  for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
-    scaled.A /= s;
-    scaled.B /= s;
+    scaled.A /= scale_grid_[g];
+    scaled.B /= scale_grid_[g];
     const auto d = discretize_zoh(scaled, Ts);
-    A_grid_.emplace_back(d.A);
-    B_grid_.emplace_back(d.B);
+    if (g == unit) {
+      rest_lu_.compute(Matrix::Identity(d.A.rows(), d.A.cols()) - Matrix(d.A));
+      rest_B_ = d.B;
+    }
     auto& ab = AB_grid_.emplace_back();
     const auto n = d.A.rows();
     for (Eigen::Index r = 0; r < n; ++r) {
@@ -286,9 +289,7 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   }
   if (has(EffectKind::hysteresis)) x -= p(EffectKind::hysteresis)[0] * lag / kPlays;
   const double w = nonlinearity(x);
-  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;
-  const Matrix I = Matrix::Identity(A_grid_[unit].rows(), A_grid_[unit].cols());
-  const Vector rest = (I - A_grid_[unit]).partialPivLu().solve(B_grid_[unit] * w);
+  const Vector rest = rest_lu_.solve(rest_B_ * w);
   y_lin_ = D_ * w;
   for (Eigen::Index i = 0; i < rest.size(); ++i) {
     x_[static_cast<size_t>(i)] = rest(i);

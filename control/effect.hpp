@@ -6,6 +6,7 @@
 /// simulated rig runs after a diagnosis).
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -262,14 +263,15 @@ class AugmentedPlant final {
   double io_delay_ = 1.0;
   // Linear block (G, G with a creep branch, or G times a mode), discretised for
   // a grid of time scales when the effect changes the time scale.
-  std::vector<Matrix> A_grid_;
-  std::vector<Vector> B_grid_;
   /// Per grid entry, [A | B] row-major, as linear_step reads it.
   std::vector<std::array<double, kMaxOrder*(kMaxOrder + 1)>> AB_grid_;
   std::vector<double> scale_grid_;
   std::array<double, kMaxOrder> C_{};
   double D_ = 0.0;
   std::array<double, kMaxOrder> x_{};
+  /// The rest state at time scale 1, x = (I - A)^-1 B w: (I - A) factorised once, B.
+  Eigen::PartialPivLU<Matrix> rest_lu_;
+  Vector rest_B_;
   LinearStep linear_step_ = nullptr;
   double dc_gain_ = 0.0, y_ref_ = 1.0;
   std::array<double, kDelayLine> delay_line_{};

@@ -1063,7 +1063,7 @@ StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& pro
 
 /// Fills a candidate from the best fit in each of its spaces (candidate_spaces): parameters, errors, score.
 void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
-                      const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                      const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
                       const DiagnosisOptions& o) {
   const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - o.hysteresis_shape_min_gain) * best[1].cost ? 1 : 0;
   c.effect = spaces[v].effects(best[v].z).front();
@@ -1077,32 +1077,33 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   const std::vector<Effect> e{c.effect};
   const auto pred = problem.predict(e, nominal_of(c), true);
   c.gain = pred.gain;
-  c.errors = errors_of(data, pred.y, res.held_out);
+  c.errors = errors_of(data, pred.y, held_out);
   c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
             (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
 }
 
-/// Fits candidates `which` of res.candidates, each from its starts: every (candidate, space, start) is a
+/// Fits `candidates[i]` for every i in `which` from starts[i]: every (candidate, space, start) is a
 /// task of its own (a loop's eight fits cost as much as the other candidates together, so whole candidates
 /// balanced badly over threads), the loop's first. Each task starts from `problem`'s loop memory, so the
 /// result does not depend on the order or the threads.
-void fit_each(std::string_view stage, DiagnosisResult& res, const std::vector<size_t>& which, const Starts& starts,
-              Problem& problem, const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, const std::vector<size_t>& which,
+              const Starts& starts, const std::vector<std::vector<char>>& held_out, Problem& problem,
+              const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
   struct Task {
     size_t candidate, space, start;
   };
   std::vector<std::vector<FitSpace>> spaces;
   std::vector<Task> tasks;
   for (size_t w = 0; w < which.size(); ++w) {
-    spaces.push_back(candidate_spaces(res.candidates[which[w]].effect.kind, scale, o, data));
+    spaces.push_back(candidate_spaces(candidates[which[w]].effect.kind, scale, o, data));
     for (size_t v = 0; v < spaces.back().size(); ++v)
-      for (size_t i = 0; i < starts[w].size(); ++i) tasks.push_back({w, v, i});
+      for (size_t i = 0; i < starts[which[w]].size(); ++i) tasks.push_back({w, v, i});
   }
   std::stable_partition(tasks.begin(), tasks.end(), [&](const Task& t) { return spaces[t.candidate].size() > 1; });
   std::vector<StartFit> fits(tasks.size());
   run_each(stage, tasks.size(), problem, o, [&](size_t i, Problem& own) {
     const Task& t = tasks[i];
-    fits[i] = fit_from(spaces[t.candidate][t.space], starts[t.candidate][t.start], own, data.size());
+    fits[i] = fit_from(spaces[t.candidate][t.space], starts[which[t.candidate]][t.start], own, data.size());
   });
   std::vector<std::vector<StartFit>> best(which.size());
   for (size_t w = 0; w < which.size(); ++w) best[w].resize(spaces[w].size());
@@ -1111,7 +1112,7 @@ void fit_each(std::string_view stage, DiagnosisResult& res, const std::vector<si
     if (b.z.size() == 0 || fits[i].cost < b.cost) b = std::move(fits[i]);
   }
   for (size_t w = 0; w < which.size(); ++w)
-    finish_candidate(res.candidates[which[w]], spaces[w], best[w], res, problem, data, o);
+    finish_candidate(candidates[which[w]], spaces[w], best[w], held_out, problem, data, o);
 }
 
 /// When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
@@ -1151,9 +1152,8 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
-  Starts ordered;
-  for (size_t i : order) ordered.push_back(starts[i]);
-  fit_each(warm ? "candidate fits at the leader's delay" : "candidate fits", res, order, ordered, problem, data, scale, o);
+  fit_each(warm ? "candidate fits at the leader's delay" : "candidate fits", res.candidates, order, starts, res.held_out,
+           problem, data, scale, o);
   // What the loop's fit chose stays for the fits that follow (pairs with the loop).
   for (size_t i : order)
     if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
@@ -1309,18 +1309,17 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
 /// effect is never credited with its partner's better fit. Re-ranks the candidates.
 void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
                          const DataScale& scale, const DiagnosisOptions& o) {
-  DiagnosisResult alone;  // the members' refits, beside their own fits
-  alone.held_out = res.held_out;
+  std::vector<CandidateResult> alone;  // the members' refits, beside their own fits
   Starts starts;
   for (const Effect& e : pair.effects)
     if (const auto* own = fitted_candidate(res, e.kind)) {
-      alone.candidates.push_back(*own);
+      alone.push_back(*own);
       starts.push_back({start_at(e, pair.nominal.time_scale, scale, o, data)});
     }
-  std::vector<size_t> all(alone.candidates.size());
+  std::vector<size_t> all(alone.size());
   std::iota(all.begin(), all.end(), 0);
-  fit_each("pair members refitted alone", alone, all, starts, problem, data, scale, o);
-  for (auto& c : alone.candidates) {
+  fit_each("pair members refitted alone", alone, all, starts, res.held_out, problem, data, scale, o);
+  for (auto& c : alone) {
     auto* own = fitted_candidate(res, c.effect.kind);
     if (c.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(c);
   }
