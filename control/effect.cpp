@@ -2,6 +2,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <numbers>
 
@@ -102,9 +103,8 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       return {{"knee_um", 0.0, 2.0 * y_abs, false, rel(y_abs, {0.0, 0.4, 0.8})},
               {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(y_abs, {1.5, 5.0, 20.0})}};
     case EffectKind::delay: {
-      const double n_max = static_cast<double>(kDelayLineSamples - 20);
       const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
-      return {{"extra_delay_s", 0.0, n_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
+      return {{"extra_delay_s", 0.0, d.delay_samples_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
     }
     case EffectKind::asymmetric_dynamics:
       return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}}};
@@ -212,6 +212,8 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     p_[static_cast<size_t>(e.kind)] = e.p;
     if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
   }
+  const double delay_samples = io_delay + (has(EffectKind::delay) ? p(EffectKind::delay)[0] / Ts : 0.0);
+  delay_line_.resize(std::bit_ceil(static_cast<size_t>(delay_samples) + 2));
   if (has(EffectKind::hysteresis)) play_r_ = play_thresholds(p(EffectKind::hysteresis)[1], p(EffectKind::hysteresis)[2]);
   // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
   if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
@@ -275,7 +277,7 @@ double AugmentedPlant::output_stage(double y, long sample) const noexcept {
 }
 
 void AugmentedPlant::reset_steady_state(double u) noexcept {
-  delay_line_.fill(u);
+  std::fill(delay_line_.begin(), delay_line_.end(), u);
   head_ = 0;
   slew_state_ = u;
   sample_ = 0;
@@ -320,14 +322,15 @@ double AugmentedPlant::input_stage(double x) noexcept {
 }
 
 void AugmentedPlant::apply(double u) noexcept {
-  delay_line_[static_cast<size_t>(head_)] = u;
+  delay_line_[head_] = u;
   double delay = io_delay_;
   if (has(EffectKind::delay)) delay += p(EffectKind::delay)[0] / Ts_;
   const int whole = static_cast<int>(delay);
   const double frac = delay - whole;
-  const auto at = [&](int back) { return delay_line_[static_cast<size_t>((head_ - back + 2 * kDelayLine) % kDelayLine)]; };
+  const size_t mask = delay_line_.size() - 1;
+  const auto at = [&](int back) { return delay_line_[(head_ - static_cast<size_t>(back)) & mask]; };
   const double x = input_stage(frac > 0.0 ? (1.0 - frac) * at(whole) + frac * at(whole + 1) : at(whole));
-  head_ = (head_ + 1) % kDelayLine;
+  head_ = (head_ + 1) & mask;
 
   const double w = nonlinearity(x);
   if (scale_grid_.size() == 1) {

@@ -71,6 +71,12 @@ struct ParameterSpec {
   bool fixed = false;
 };
 
+/// The longest extra delay the diagnosis fits, in samples of the fastest recording.
+inline constexpr double kFittedDelaySamples = 236.0;
+/// The longest extra delay a file may give, in samples of its loop period: the plant sizes its delay
+/// line to the delay at construction, so a delay fitted on a 100 Hz recording runs in a 1 kHz sim.
+inline constexpr double kMaxDelaySamples = 65536.0;
+
 /// The size of what was recorded: parameter bounds and starting points scale
 /// with it, so the same candidates work from millivolt amplifier inputs to a
 /// kilovolt, nanometre to millimetre strokes and 100 Hz to 10 kHz sampling.
@@ -80,20 +86,19 @@ struct DataScale {
   double duration_s = 30.0;   ///< the longest recording
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
   double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
+  double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
   [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
   /// The largest and smallest scales: a file's parameters (nothing recorded to
   /// scale by) are checked against the union of their bounds, physical limits only.
   static DataScale unbounded(double sample_time_s) noexcept {
-    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12};
+    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12,
+            .delay_samples_max = kMaxDelaySamples};
   }
   static DataScale tiny(double sample_time_s) noexcept {
     return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12};
   }
 };
-
-/// Length of the plant's delay line (io delay plus the delay effect, in samples).
-inline constexpr int kDelayLineSamples = 256;
 
 /// Maximum number of parameters of one effect.
 inline constexpr int kMaxEffectParams = 4;
@@ -232,7 +237,6 @@ class AugmentedPlant final {
   static constexpr int kMaxOrder = 9;
   static constexpr size_t kKinds = kEffectKindNames.size();
   static constexpr int kPlays = kHysteresisPlays;
-  static constexpr int kDelayLine = kDelayLineSamples;
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxOrder, 1>;
 
@@ -274,8 +278,9 @@ class AugmentedPlant final {
   Vector rest_B_;
   LinearStep linear_step_ = nullptr;
   double dc_gain_ = 0.0, y_ref_ = 1.0;
-  std::array<double, kDelayLine> delay_line_{};
-  int head_ = 0;
+  /// The delayed commands, a power of two long (at least the whole delay plus two, sized at construction).
+  std::vector<double> delay_line_;
+  size_t head_ = 0;
   std::array<double, kPlays> plays_{};
   std::array<double, kPlays> play_r_{};  ///< the hysteresis effect's play thresholds
   double slew_state_ = 0.0;

@@ -131,6 +131,18 @@ TEST(AugmentedPlant, WholeSampleDelayShiftsTheOutput) {
   for (size_t k = 10; k < u.size(); ++k) ASSERT_NEAR(y[k], y0[k - 3], 1e-6) << k;
 }
 
+TEST(AugmentedPlant, ADelayLongerThanTheFittedRangeRunsAtTheLoopRate) {
+  // 0.664 s at 1 kHz: a delay the diagnosis fitted on a 100 Hz recording (66 of its samples), 664 of
+  // the sim's; the line is sized at construction, so it is neither refused nor wrapped.
+  const auto u = voltage(4000);
+  const auto y0 = run({}, u, u[0]);
+  const auto y = run({EffectKind::delay, {0.664}}, u, u[0]);
+  for (size_t k = 0; k < 665; ++k) ASSERT_NEAR(y[k], y0[0], 1e-9) << k;  // still at rest
+  for (size_t k = 700; k < u.size(); ++k) ASSERT_NEAR(y[k], y0[k - 664], 1e-6) << k;
+  const auto half = run({EffectKind::delay, {0.6645}}, u, u[0]);  // half a sample more: the mean of two
+  for (size_t k = 700; k < u.size(); ++k) ASSERT_NEAR(half[k], 0.5 * (y0[k - 664] + y0[k - 665]), 0.05) << k;
+}
+
 TEST(AugmentedPlant, AsymmetricDynamicsSlowsTheRelaxation) {
   const auto up = steps(20000, 100.0, 400.0), down = steps(20000, 400.0, 100.0);
   const Effect e{EffectKind::asymmetric_dynamics, {1.0}};
@@ -219,6 +231,21 @@ TEST(Effect, ParametersOutOfBoundsAreRejectedWithTheirKey) {
   } catch (const ConfigError& e) {
     EXPECT_EQ(e.key(), "effect.dead_zone.threshold_V");
   }
+}
+
+TEST(Effect, ADelayIsBoundedByTheLinesLengthInLoopSamplesAndTheFitByItsOwn) {
+  EXPECT_NO_THROW(AugmentedPlant(paper_model(3), 1, Ts, {EffectKind::delay, {2.0}}));
+  try {
+    AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::delay, {(kMaxDelaySamples + 1.0) * Ts}});
+    FAIL() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "effect.delay.extra_delay_s");
+  }
+  // What diagnose fits: at most kFittedDelaySamples of the fastest recording.
+  DataScale recorded;
+  recorded.sample_time_s = 0.01;
+  recorded.sample_time_min_s = 0.005;
+  EXPECT_DOUBLE_EQ(parameter_specs(EffectKind::delay, recorded)[0].upper, kFittedDelaySamples * 0.005);
 }
 
 TEST(Effect, NamesRoundTrip) {
