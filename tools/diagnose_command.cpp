@@ -94,12 +94,10 @@ RegimeAxis regime_axis(EffectKind k) {
   }
 }
 
-void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vector<Series>& data,
-                  const std::vector<std::string>& names, const std::string& summary, const std::string& model_path) {
-  fs::create_directories(dir);
-  const size_t R = data.size();
-  // Data files: t, y, y_baseline, y_fitted, residual_baseline, residual_fitted, u, du/dt, direction
-  for (size_t i = 0; i < R; ++i) {
+/// rec<i>.dat per recording, what the plots read: t, y, y_baseline, y_fitted, residual_baseline,
+/// residual_fitted, u, du/dt, direction, held out.
+void write_plot_data(const fs::path& dir, const DiagnosisResult& r, const std::vector<Series>& data) {
+  for (size_t i = 0; i < data.size(); ++i) {
     std::ostringstream d;
     d << "# t_s y_um y_baseline y_fitted res_baseline res_fitted u_V du_dt_V_per_s rising held_out\n";
     const auto& s = data[i];
@@ -114,56 +112,86 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
     }
     write_text_file(dir / ("rec" + std::to_string(i) + ".dat"), d.str());
   }
-  const auto dat = [&](size_t i) { return "'" + (dir / ("rec" + std::to_string(i) + ".dat")).string() + "'"; };
-  const std::string rows = std::to_string(R);
-  std::ostringstream gp;
-  gp << "set terminal pngcairo noenhanced size 1200," << 360 * R << " font ',10'\nset grid\nset key outside right\n";
-  gp << "set output '" << (dir / "measured_vs_simulated.png").string() << "'\nset multiplot layout " << rows
-     << ",1 title 'Measured vs simulated from the recorded u (output error)'\nset xlabel 't (s)'\nset ylabel 'y (um)'\n";
-  for (size_t i = 0; i < R; ++i)
-    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
-       << " u 1:2 w l lc rgb '#999999' t 'measured', '' u 1:3 w l lc rgb '#1f77b4' t 'nominal model', '' u 1:4 w l lc rgb '#d62728' t 'augmented model'\n";
-  gp << "unset multiplot\n";
-  // Residual over time with the mismatch windows shaded.
-  gp << "set output '" << (dir / "residual.png").string() << "'\nset multiplot layout " << rows
-     << ",1 title 'Residual of the nominal model; shaded: located mismatch windows; dashed: +-2 sigma noise'\n"
-     << "set ylabel 'y minus model (um)'\n";
-  for (size_t i = 0; i < R; ++i) {
-    int obj = 1;
-    for (const auto& w : r.mismatch)
-      if (w.recording == static_cast<int>(i))
-        gp << "set object " << obj++ << " rect from " << w.t_start_s << ", graph 0 to " << w.t_end_s
-           << ", graph 1 fc rgb '#ffe0e0' fs solid 1.0 noborder behind\n";
-    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
-       << " u 1:5 w l lc rgb '#1f77b4' t 'residual', " << 2 * r.noise_sigma_um << " w l dt 2 lc rgb 'black' t '+2 sigma', "
-       << -2 * r.noise_sigma_um << " w l dt 2 lc rgb 'black' notitle\n";
-    for (int o = 1; o < obj; ++o) gp << "unset object " << o << "\n";
-  }
-  gp << "unset multiplot\n";
-  // Residual against the regime variable.
-  const auto axis = regime_axis(r.chosen == EffectKind::none && !r.candidates.empty() ? r.candidates.front().effect.kind : r.chosen);
-  std::string col = "7", xlabel = "u (V)";
-  if (axis == RegimeAxis::displacement) col = "3", xlabel = "simulated displacement (um)";
-  if (axis == RegimeAxis::time) col = "1", xlabel = "t (s)";
-  if (axis == RegimeAxis::voltage_rate) col = "8", xlabel = "du/dt (V/s)";
-  gp << "set output '" << (dir / "residual_vs_regime.png").string() << "'\nset terminal pngcairo noenhanced size 1000,600\n"
-     << "set title 'Nominal-model residual vs the regime variable, split by direction of the voltage'\nset xlabel '" << xlabel
-     << "'\nset ylabel 'y minus model (um)'\nplot ";
-  for (size_t i = 0; i < R; ++i)
-    gp << (i ? ", " : "") << dat(i) << " u " << col << ":($9==1?$5:1/0) w p pt 7 ps 0.3 lc rgb '#d62728' t '" << (i ? "" : "u rising")
-       << "', " << dat(i) << " u " << col << ":($9==0?$5:1/0) w p pt 7 ps 0.3 lc rgb '#1f77b4' t '" << (i ? "" : "u falling") << "'";
-  gp << "\n";
-  // Before / after on the held-out segments.
-  gp << "set output '" << (dir / "validation.png").string() << "'\nset terminal pngcairo noenhanced size 1200," << 360 * R
-     << " font ',10'\nset multiplot layout " << rows
-     << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
-  for (size_t i = 0; i < R; ++i)
-    gp << "set title '" << fs::path(names[i]).filename().string() << "'\nplot " << dat(i)
-       << " u 1:($10==1?$5:1/0) w l lc rgb '#1f77b4' t 'before', '' u 1:($10==1?$6:1/0) w l lc rgb '#d62728' t 'after'\n";
-  gp << "unset multiplot\n";
-  write_text_file(dir / "diagnose.gp", gp.str());
-  run_gnuplot(dir / "diagnose.gp");
+}
 
+/// The gnuplot script of the report's plots, reading write_plot_data's files.
+class ReportPlots {
+ public:
+  ReportPlots(const fs::path& dir, const DiagnosisResult& r, const std::vector<std::string>& names)
+      : dir_(dir), r_(r), names_(names), rows_(std::to_string(names.size())) {
+    gp_ << "set terminal pngcairo noenhanced size 1200," << 360 * names.size() << " font ',10'\nset grid\nset key outside right\n";
+  }
+
+  void measured_vs_simulated() {
+    gp_ << "set output '" << (dir_ / "measured_vs_simulated.png").string() << "'\nset multiplot layout " << rows_
+        << ",1 title 'Measured vs simulated from the recorded u (output error)'\nset xlabel 't (s)'\nset ylabel 'y (um)'\n";
+    for (size_t i = 0; i < names_.size(); ++i)
+      gp_ << title(i) << "plot " << dat(i)
+          << " u 1:2 w l lc rgb '#999999' t 'measured', '' u 1:3 w l lc rgb '#1f77b4' t 'nominal model', '' u 1:4 w l lc rgb '#d62728' t 'augmented model'\n";
+    gp_ << "unset multiplot\n";
+  }
+
+  /// Residual over time with the mismatch windows shaded.
+  void residual() {
+    gp_ << "set output '" << (dir_ / "residual.png").string() << "'\nset multiplot layout " << rows_
+        << ",1 title 'Residual of the nominal model; shaded: located mismatch windows; dashed: +-2 sigma noise'\n"
+        << "set ylabel 'y minus model (um)'\n";
+    for (size_t i = 0; i < names_.size(); ++i) {
+      int obj = 1;
+      for (const auto& w : r_.mismatch)
+        if (w.recording == static_cast<int>(i))
+          gp_ << "set object " << obj++ << " rect from " << w.t_start_s << ", graph 0 to " << w.t_end_s
+              << ", graph 1 fc rgb '#ffe0e0' fs solid 1.0 noborder behind\n";
+      gp_ << title(i) << "plot " << dat(i) << " u 1:5 w l lc rgb '#1f77b4' t 'residual', " << 2 * r_.noise_sigma_um
+          << " w l dt 2 lc rgb 'black' t '+2 sigma', " << -2 * r_.noise_sigma_um << " w l dt 2 lc rgb 'black' notitle\n";
+      for (int o = 1; o < obj; ++o) gp_ << "unset object " << o << "\n";
+    }
+    gp_ << "unset multiplot\n";
+  }
+
+  /// Residual against the regime variable of the leading effect, split by the voltage's direction.
+  void residual_vs_regime() {
+    const auto axis = regime_axis(r_.chosen == EffectKind::none && !r_.candidates.empty() ? r_.candidates.front().effect.kind : r_.chosen);
+    std::string col = "7", xlabel = "u (V)";
+    if (axis == RegimeAxis::displacement) col = "3", xlabel = "simulated displacement (um)";
+    if (axis == RegimeAxis::time) col = "1", xlabel = "t (s)";
+    if (axis == RegimeAxis::voltage_rate) col = "8", xlabel = "du/dt (V/s)";
+    gp_ << "set output '" << (dir_ / "residual_vs_regime.png").string() << "'\nset terminal pngcairo noenhanced size 1000,600\n"
+        << "set title 'Nominal-model residual vs the regime variable, split by direction of the voltage'\nset xlabel '" << xlabel
+        << "'\nset ylabel 'y minus model (um)'\nplot ";
+    for (size_t i = 0; i < names_.size(); ++i)
+      gp_ << (i ? ", " : "") << dat(i) << " u " << col << ":($9==1?$5:1/0) w p pt 7 ps 0.3 lc rgb '#d62728' t '" << (i ? "" : "u rising")
+          << "', " << dat(i) << " u " << col << ":($9==0?$5:1/0) w p pt 7 ps 0.3 lc rgb '#1f77b4' t '" << (i ? "" : "u falling") << "'";
+    gp_ << "\n";
+  }
+
+  /// Before / after on the held-out segments.
+  void validation() {
+    gp_ << "set output '" << (dir_ / "validation.png").string() << "'\nset terminal pngcairo noenhanced size 1200," << 360 * names_.size()
+        << " font ',10'\nset multiplot layout " << rows_
+        << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
+    for (size_t i = 0; i < names_.size(); ++i)
+      gp_ << title(i) << "plot " << dat(i)
+          << " u 1:($10==1?$5:1/0) w l lc rgb '#1f77b4' t 'before', '' u 1:($10==1?$6:1/0) w l lc rgb '#d62728' t 'after'\n";
+    gp_ << "unset multiplot\n";
+  }
+
+  [[nodiscard]] std::string script() const { return gp_.str(); }
+
+ private:
+  [[nodiscard]] std::string dat(size_t i) const { return "'" + (dir_ / ("rec" + std::to_string(i) + ".dat")).string() + "'"; }
+  [[nodiscard]] std::string title(size_t i) const { return "set title '" + fs::path(names_[i]).filename().string() + "'\n"; }
+
+  const fs::path& dir_;
+  const DiagnosisResult& r_;
+  const std::vector<std::string>& names_;
+  const std::string rows_;
+  std::ostringstream gp_;
+};
+
+/// report.md: the verdict, the errors before and after, where the model disagrees, the candidates.
+std::string report_markdown(const DiagnosisResult& r, const std::vector<std::string>& names, const std::string& summary,
+                            const std::string& model_path) {
   std::ostringstream md;
   md << "# pvcgel diagnose\n\n**Verdict: " << r.verdict << "**\n\n" << r.explanation << "\n\n";
   md << "| | RMSE all (um) | fit segment (um) | held-out (um) |\n|---|---|---|---|\n";
@@ -194,7 +222,21 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
        << " |\n";
   }
   md << "\n## Before and after on held-out data\n\n![validation](validation.png)\n\n```\n" << summary << "```\n";
-  write_text_file(dir / "report.md", md.str());
+  return md.str();
+}
+
+void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vector<Series>& data,
+                  const std::vector<std::string>& names, const std::string& summary, const std::string& model_path) {
+  fs::create_directories(dir);
+  write_plot_data(dir, r, data);
+  ReportPlots plots(dir, r, names);
+  plots.measured_vs_simulated();
+  plots.residual();
+  plots.residual_vs_regime();
+  plots.validation();
+  write_text_file(dir / "diagnose.gp", plots.script());
+  run_gnuplot(dir / "diagnose.gp");
+  write_text_file(dir / "report.md", report_markdown(r, names, summary, model_path));
 }
 
 }  // namespace
@@ -413,13 +455,14 @@ std::function<void(std::string_view, std::size_t, std::size_t)> progress_printer
   };
 }
 
-}  // namespace
-
-DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
-  const double cpu0 = process_cpu_s();
-  const LoadedModel lm = load_model(a.model);
+/// The recordings, checked against the model (a bad one names its file), and the rows each skipped.
+struct LoadedRecordings {
   std::vector<Series> data;
   std::vector<long> skipped;
+};
+
+LoadedRecordings load_recordings(const DiagnoseArgs& a, const LoadedModel& lm) {
+  LoadedRecordings out;
   for (const auto& path : a.recordings) {
     const Recording rec = read_recording(path);
     Series s;
@@ -432,9 +475,13 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     } catch (const std::invalid_argument& e) {
       throw std::runtime_error(path + ": " + e.what());
     }
-    data.push_back(std::move(s));
-    skipped.push_back(rec.skipped_rows);
+    out.data.push_back(std::move(s));
+    out.skipped.push_back(rec.skipped_rows);
   }
+  return out;
+}
+
+DiagnosisOptions diagnosis_options(const DiagnoseArgs& a, const LoadedModel& lm) {
   DiagnosisOptions opt;
   opt.io_delay_samples = lm.io_delay_samples;
   opt.io_delay_declared = lm.io_delay_declared;
@@ -444,17 +491,11 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
       parallel_for(count, threads, task);
     };
   if (a.progress) opt.progress = progress_printer();
-  DiagnoseOutcome out;
-  try {
-    out.result = diagnose(lm.model, data, opt);
-  } catch (const control::ConfigError& e) {
-    const toml::table root = toml::parse_file(a.model);
-    const std::string key = e.key() == "model.poly" ? "poly" : "G_den";
-    throw std::runtime_error(where(a.model, line_of(root, "model", key)) + ": " + e.what());
-  }
-  const auto& r = out.result;
-  const double cpu = process_cpu_s() - cpu0;
+  return opt;
+}
 
+/// What the command prints: the verdict, alignment, nominal refit, errors, mismatch windows, candidates.
+std::string summary_text(const DiagnosisResult& r, const DiagnoseArgs& a, const std::vector<long>& skipped, double cpu) {
   std::ostringstream s;
   s << "verdict: " << r.verdict << "\n" << r.explanation << "\n";
   s << "noise (estimated): " << number_or_null(r.noise_sigma_um, "%.4f") << " um\n";
@@ -489,17 +530,38 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
     s << "\n";
   }
   s << "cpu: " << number_or_null(cpu, "%.2f") << " s (" << r.simulations << " simulations)\n";
-  out.summary = s.str();
+  return s.str();
+}
 
-  if (!a.predict.empty()) {
-    for (size_t i = 0; i < data.size(); ++i) {
-      std::ostringstream p;
-      p << "t_s,y_um_baseline,y_um_fitted\n";
-      for (size_t k = 0; k < data[i].t_s.size(); ++k)
-        p << number_or_null(data[i].t_s[k], "%.6f") << ',' << number_or_null(r.y_baseline_um[i][k], "%.6f") << ',' << number_or_null(r.y_fitted_um[i][k], "%.6f") << '\n';
-      write_text_file(a.predict + std::to_string(i) + ".csv", p.str());
-    }
+/// PREFIX<i>.csv per recording: t, the nominal's and the augmented model's prediction.
+void write_predictions(const std::string& prefix, const DiagnosisResult& r, const std::vector<Series>& data) {
+  for (size_t i = 0; i < data.size(); ++i) {
+    std::ostringstream p;
+    p << "t_s,y_um_baseline,y_um_fitted\n";
+    for (size_t k = 0; k < data[i].t_s.size(); ++k)
+      p << number_or_null(data[i].t_s[k], "%.6f") << ',' << number_or_null(r.y_baseline_um[i][k], "%.6f") << ',' << number_or_null(r.y_fitted_um[i][k], "%.6f") << '\n';
+    write_text_file(prefix + std::to_string(i) + ".csv", p.str());
   }
+}
+
+}  // namespace
+
+DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
+  const double cpu0 = process_cpu_s();
+  const LoadedModel lm = load_model(a.model);
+  const auto [data, skipped] = load_recordings(a, lm);
+  DiagnoseOutcome out;
+  try {
+    out.result = diagnose(lm.model, data, diagnosis_options(a, lm));
+  } catch (const control::ConfigError& e) {
+    const toml::table root = toml::parse_file(a.model);
+    const std::string key = e.key() == "model.poly" ? "poly" : "G_den";
+    throw std::runtime_error(where(a.model, line_of(root, "model", key)) + ": " + e.what());
+  }
+  const auto& r = out.result;
+  const double cpu = process_cpu_s() - cpu0;
+  out.summary = summary_text(r, a, skipped, cpu);
+  if (!a.predict.empty()) write_predictions(a.predict, r, data);
   // The JSON and the report first: nothing after this can lose them.
   const std::string model_path = augmented_model_path(a);
   if (!a.json.empty()) write_text_file(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
