@@ -53,21 +53,25 @@ const std::vector<double>& Recording::col(const std::string& name) const {
   return it->second;
 }
 
-Recording read_recording(const std::string& path, bool keep_invalid_rows) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error("cannot open recording '" + path + "'");
-  Recording rec;
-  rec.path = path;
-  std::string line;
-  int lineno = 0;
+namespace {
+
+/// The file's rows as text: `# key: value` header lines into rec.header, the column names, each data row
+/// with its line number. A last line cut by a crash is counted in rec.truncated_rows, not read.
+struct CsvRows {
   std::vector<std::string> names;
   std::vector<std::vector<std::string>> cells;
   std::vector<int> line_of_row;
+};
+
+CsvRows read_rows(std::istream& in, const std::string& path, Recording& rec) {
+  CsvRows out;
+  std::string line;
+  int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
     // A writer killed mid-line leaves a last line without its newline: skip and count it.
     if (in.eof()) {
-      if (!names.empty() && !line.empty()) ++rec.truncated_rows;
+      if (!out.names.empty() && !line.empty()) ++rec.truncated_rows;
       break;
     }
     if (!line.empty() && line.back() == '\r') line.pop_back();
@@ -83,39 +87,44 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
       }
       continue;
     }
-    if (names.empty()) {
-      names = split(line);
+    if (out.names.empty()) {
+      out.names = split(line);
       for (const char* required : daemon::kRecordingRequiredColumns)
-        if (std::find(names.begin(), names.end(), required) == names.end())
+        if (std::find(out.names.begin(), out.names.end(), required) == out.names.end())
           throw std::runtime_error(path + ":" + std::to_string(lineno) + ": header lacks column '" + required +
                                    "' (need at least t_s,u_V,y_um)");
       continue;
     }
     auto row = split(line);
-    if (row.size() != names.size())
+    if (row.size() != out.names.size())
       throw std::runtime_error(path + ":" + std::to_string(lineno) + ": " + std::to_string(row.size()) +
-                               " fields, header has " + std::to_string(names.size()));
-    cells.push_back(std::move(row));
-    line_of_row.push_back(lineno);
+                               " fields, header has " + std::to_string(out.names.size()));
+    out.cells.push_back(std::move(row));
+    out.line_of_row.push_back(lineno);
   }
-  if (names.empty()) throw std::runtime_error(path + ": no header row");
-  check_physical(path, names, cells, line_of_row);
-  if (cells.size() < 2) throw std::runtime_error(path + ": fewer than 2 data rows");
+  if (out.names.empty()) throw std::runtime_error(path + ": no header row");
+  return out;
+}
 
-  for (size_t c = 0; c < names.size(); ++c) {
-    std::vector<double> v(cells.size());
+/// Columns that parse as numbers everywhere into rec.numeric, the others into rec.text.
+void store_columns(const CsvRows& rows, Recording& rec) {
+  for (size_t c = 0; c < rows.names.size(); ++c) {
+    std::vector<double> v(rows.cells.size());
     bool numeric = true;
-    for (size_t r = 0; r < cells.size() && numeric; ++r) numeric = to_number(cells[r][c], v[r]);
-    if (numeric) rec.numeric[names[c]] = std::move(v);
+    for (size_t r = 0; r < rows.cells.size() && numeric; ++r) numeric = to_number(rows.cells[r][c], v[r]);
+    if (numeric) rec.numeric[rows.names[c]] = std::move(v);
     else {
-      auto& t = rec.text[names[c]];
-      for (auto& row : cells) t.push_back(row[c]);
+      auto& t = rec.text[rows.names[c]];
+      for (const auto& row : rows.cells) t.push_back(row[c]);
     }
   }
   for (const char* required : daemon::kRecordingRequiredColumns)
-    if (!rec.numeric.count(required)) throw std::runtime_error(path + ": column '" + required + "' is not numeric");
+    if (!rec.numeric.count(required)) throw std::runtime_error(rec.path + ": column '" + required + "' is not numeric");
+}
 
-  // Drop rows whose core values are not finite, counting them.
+/// Drops the rows whose t_s, u_V or y_um is not finite (with keep_invalid_rows, only those without a
+/// finite t_s), counting them; returns the line number of each row kept.
+std::vector<int> drop_invalid_rows(Recording& rec, const std::vector<int>& line_of_row, bool keep_invalid_rows) {
   const auto& t0 = rec.numeric["t_s"];
   std::vector<bool> keep(t0.size(), true);
   for (size_t r = 0; r < t0.size(); ++r) {
@@ -138,19 +147,38 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
   for (size_t r = 0; r < keep.size(); ++r)
     if (keep[r]) lines.push_back(line_of_row[r]);
     else ++rec.skipped_rows;
+  return lines;
+}
 
-  const auto& t = rec.numeric["t_s"];
-  if (t.size() < 2) throw std::runtime_error(path + ": fewer than 2 valid rows");
+/// The sample time: time must increase uniformly (1% tolerance); a bad step names its line.
+double uniform_sample_time(const Recording& rec, const std::vector<int>& lines) {
+  const auto& t = rec.numeric.at("t_s");
+  if (t.size() < 2) throw std::runtime_error(rec.path + ": fewer than 2 valid rows");
   const double dt = (t.back() - t.front()) / static_cast<double>(t.size() - 1);
-  if (!(dt > 0.0)) throw std::runtime_error(path + ": time does not increase");
+  if (!(dt > 0.0)) throw std::runtime_error(rec.path + ": time does not increase");
   for (size_t r = 1; r < t.size(); ++r) {
     const double step = t[r] - t[r - 1];
     if (!(step > 0.0) || std::abs(step - dt) > 0.01 * dt + 1e-9)
-      throw std::runtime_error(path + ":" + std::to_string(lines[r]) + ": non-uniform or non-monotone time (step " +
+      throw std::runtime_error(rec.path + ":" + std::to_string(lines[r]) + ": non-uniform or non-monotone time (step " +
                                std::to_string(step) + " s, expected " + std::to_string(dt) + " s)" +
                                (rec.skipped_rows ? " after skipping " + std::to_string(rec.skipped_rows) + " invalid rows" : ""));
   }
-  rec.sample_time_s = dt;
+  return dt;
+}
+
+}  // namespace
+
+Recording read_recording(const std::string& path, bool keep_invalid_rows) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open recording '" + path + "'");
+  Recording rec;
+  rec.path = path;
+  const CsvRows rows = read_rows(in, path, rec);
+  check_physical(path, rows.names, rows.cells, rows.line_of_row);
+  if (rows.cells.size() < 2) throw std::runtime_error(path + ": fewer than 2 data rows");
+  store_columns(rows, rec);
+  const auto lines = drop_invalid_rows(rec, rows.line_of_row, keep_invalid_rows);
+  rec.sample_time_s = uniform_sample_time(rec, lines);
   return rec;
 }
 
