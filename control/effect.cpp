@@ -200,7 +200,7 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
 }
 
 AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, double Ts, std::span<const Effect> effects)
-    : f_(model.f), Ts_(Ts), io_delay_(io_delay) {
+    : f_(model.f), Ts_(Ts) {
   if (!(Ts > 0.0)) throw ConfigError("sample_time_s", "must be positive");
   if (!(io_delay >= 0.0 && io_delay <= 8.0)) throw ConfigError("model.io_delay_samples", "must be 0..8 samples");
   if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
@@ -213,7 +213,9 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
   }
   const double delay_samples = io_delay + (has(EffectKind::delay) ? p(EffectKind::delay)[0] / Ts : 0.0);
-  delay_line_.resize(std::bit_ceil(static_cast<size_t>(delay_samples) + 2));
+  delay_whole_ = static_cast<int>(delay_samples);
+  delay_fraction_ = delay_samples - delay_whole_;
+  delay_line_.resize(std::bit_ceil(static_cast<size_t>(delay_whole_) + 2));
   if (has(EffectKind::hysteresis)) play_r_ = play_thresholds(p(EffectKind::hysteresis)[1], p(EffectKind::hysteresis)[2]);
   // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
   if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
@@ -323,13 +325,10 @@ double AugmentedPlant::input_stage(double x) noexcept {
 
 void AugmentedPlant::apply(double u) noexcept {
   delay_line_[head_] = u;
-  double delay = io_delay_;
-  if (has(EffectKind::delay)) delay += p(EffectKind::delay)[0] / Ts_;
-  const int whole = static_cast<int>(delay);
-  const double frac = delay - whole;
   const size_t mask = delay_line_.size() - 1;
   const auto at = [&](int back) { return delay_line_[(head_ - static_cast<size_t>(back)) & mask]; };
-  const double x = input_stage(frac > 0.0 ? (1.0 - frac) * at(whole) + frac * at(whole + 1) : at(whole));
+  const double frac = delay_fraction_;
+  const double x = input_stage(frac > 0.0 ? (1.0 - frac) * at(delay_whole_) + frac * at(delay_whole_ + 1) : at(delay_whole_));
   head_ = (head_ + 1) & mask;
 
   const double w = nonlinearity(x);

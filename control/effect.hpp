@@ -264,7 +264,6 @@ class AugmentedPlant final {
   OddPolynomial f_;
   double x_sat_ = 1e300;
   double Ts_ = 1e-3;
-  double io_delay_ = 1.0;
   // Linear block (G, G with a creep branch, or G times a mode), discretised for
   // a grid of time scales when the effect changes the time scale.
   /// Per grid entry, [A | B] row-major, as linear_step reads it.
@@ -281,6 +280,8 @@ class AugmentedPlant final {
   /// The delayed commands, a power of two long (at least the whole delay plus two, sized at construction).
   std::vector<double> delay_line_;
   size_t head_ = 0;
+  int delay_whole_ = 1;          ///< the I/O delay plus the delay effect, in samples: whole part
+  double delay_fraction_ = 0.0;  ///< and the fraction (the command between two samples)
   std::array<double, kPlays> plays_{};
   std::array<double, kPlays> play_r_{};  ///< the hysteresis effect's play thresholds
   double slew_state_ = 0.0;

@@ -119,7 +119,7 @@ class ReportPlots {
  public:
   ReportPlots(const fs::path& dir, const DiagnosisResult& r, const std::vector<std::string>& names)
       : dir_(dir), r_(r), names_(names), rows_(std::to_string(names.size())) {
-    gp_ << "set terminal pngcairo noenhanced size 1200," << 360 * names.size() << " font ',10'\nset grid\nset key outside right\n";
+    gp_ << stacked_terminal() << "set grid\nset key outside right\n";
   }
 
   void measured_vs_simulated() {
@@ -167,8 +167,7 @@ class ReportPlots {
 
   /// Before / after on the held-out segments.
   void validation() {
-    gp_ << "set output '" << (dir_ / "validation.png").string() << "'\nset terminal pngcairo noenhanced size 1200," << 360 * names_.size()
-        << " font ',10'\nset multiplot layout " << rows_
+    gp_ << "set output '" << (dir_ / "validation.png").string() << "'\n" << stacked_terminal() << "set multiplot layout " << rows_
         << ",1 title 'Held-out segment: residual of the nominal (before) and the augmented (after) model'\nset xlabel 't (s)'\n";
     for (size_t i = 0; i < names_.size(); ++i)
       gp_ << title(i) << "plot " << dat(i)
@@ -179,6 +178,10 @@ class ReportPlots {
   [[nodiscard]] std::string script() const { return gp_.str(); }
 
  private:
+  /// The PNG terminal of the stacked plots: one 360-pixel row per recording.
+  [[nodiscard]] std::string stacked_terminal() const {
+    return "set terminal pngcairo noenhanced size 1200," + std::to_string(360 * names_.size()) + " font ',10'\n";
+  }
   [[nodiscard]] std::string dat(size_t i) const { return "'" + (dir_ / ("rec" + std::to_string(i) + ".dat")).string() + "'"; }
   [[nodiscard]] std::string title(size_t i) const { return "set title '" + fs::path(names_[i]).filename().string() + "'\n"; }
 

@@ -63,7 +63,8 @@ struct CsvRows {
   std::vector<int> line_of_row;
 };
 
-CsvRows read_rows(std::istream& in, const std::string& path, Recording& rec) {
+CsvRows read_rows(std::istream& in, Recording& rec) {
+  const std::string& path = rec.path;
   CsvRows out;
   std::string line;
   int lineno = 0;
@@ -173,7 +174,7 @@ Recording read_recording(const std::string& path, bool keep_invalid_rows) {
   if (!in) throw std::runtime_error("cannot open recording '" + path + "'");
   Recording rec;
   rec.path = path;
-  const CsvRows rows = read_rows(in, path, rec);
+  const CsvRows rows = read_rows(in, rec);
   check_physical(path, rows.names, rows.cells, rows.line_of_row);
   if (rows.cells.size() < 2) throw std::runtime_error(path + ": fewer than 2 data rows");
   store_columns(rows, rec);
