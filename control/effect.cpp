@@ -127,7 +127,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       const double dur = std::max(d.duration_s, 0.0);
       return {{"offset_um", -y_abs, y_abs, false, {0.0}},
               {"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, rel(y_abs, {-1e-4, 1e-4})},
-              {"onset_s", 0.0, dur, false, {0.0, 0.25 * dur, 0.5 * dur}}};
+              {"onset_s", 0.0, dur, false, {0.0, 0.25 * dur, 0.5 * dur}},
+              // Thermal drift settles; a settling time a thousand recordings long is a ramp (0, the
+              // default of older files, is exactly one), a fiftieth of one nearly a step.
+              {"settling_time_s", 0.02 * dur, std::max(1e3 * dur, 1.0), true, {1e3 * dur, 0.3 * dur}, 0.0}};
     }
     case EffectKind::bias_dependent_dynamics:
       // beta per reference displacement: the largest recorded one, so beta means the same for a nanometre
@@ -164,7 +167,8 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
       return "slew limit: the amplifier cannot charge the actuator's capacitance faster than a fixed rate";
     case EffectKind::resonance: return "a structural resonance (mass-spring mode): in series behind the gel dynamics, or driven beside them by the actuator force (parallel share)";
     case EffectKind::drift:
-      return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage";
+      return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage, "
+             "a ramp or one that settles";
     case EffectKind::bias_dependent_dynamics:
       return "operating-point-dependent dynamics: the poles move (slow down or speed up) with the displacement's "
              "level or with its swing about that level";
@@ -271,10 +275,7 @@ double AugmentedPlant::output_stage(double y, long sample) const noexcept {
     const double excess = std::abs(y) - q[0];
     if (excess > 0.0) y = std::copysign(q[0] + excess / std::sqrt(1.0 + (excess / q[1]) * (excess / q[1])), y);
   }
-  if (has(EffectKind::drift)) {
-    const auto& q = p(EffectKind::drift);
-    y += q[0] + q[1] * std::max(static_cast<double>(sample) * Ts_ - q[2], 0.0);
-  }
+  if (has(EffectKind::drift)) y += drift_um(p(EffectKind::drift), static_cast<double>(sample) * Ts_);
   return y;
 }
 

@@ -154,6 +154,15 @@ inline double slew_mean_offset(double e_V, double cap_V) noexcept {
 /// ... and the state's move over the sample.
 inline double slew_state_step(double e_V, double cap_V) noexcept { return std::clamp(e_V, -cap_V, cap_V); }
 
+/// The drift effect's term t_s after the run's start (the recording's, or the controller's reset): the
+/// offset, then from the onset a ramp at rate_um_per_s that settles exponentially over settling_time_s
+/// (thermal settling: it ends rate * settling_time_s away); settling_time_s 0, the default of files written
+/// before the key existed, is a ramp that never settles.
+inline double drift_um(const std::array<double, kMaxEffectParams>& q, double t_s) noexcept {
+  const double t = std::max(t_s - q[2], 0.0);
+  return q[0] + q[1] * (q[3] > 0.0 ? -q[3] * std::expm1(-t / q[3]) : t);
+}
+
 /// Kelvin-Voigt creep branches (fraction of G(0), time constant in s) of a creep
 /// effect's parameters: one at tau, or three (fraction / 3 each) spread
 /// log-uniformly over `spread_decades` around tau (log-type creep).
@@ -200,7 +209,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    a pole pair with a zero pair just above it), and in parallel with share rho: (1 - rho) G (d + (1 - d) M)
 ///    + rho G(0) M (a fast mode fed by the actuator's force, not filtered by G: modal superposition; rho 0,
 ///    the default, is the series form alone);
-///  - drift: offset + rate max(t - onset, 0), independent of the input;
+///  - drift: offset + rate max(t - onset, 0), settling exponentially over settling_time_s when it is not 0
+///    (drift_um), independent of the input;
 ///  - bias_dependent_dynamics: G runs (1 + (beta y_op + amplitude_beta y_swing) / y_ref) times slower, y_op the
 ///    displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over the
 ///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the

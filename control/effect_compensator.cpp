@@ -214,10 +214,7 @@ double EffectCompensator::saturation_inverse(double y) const noexcept {
 }
 
 double EffectCompensator::output_side_inverse(double y, double ahead) const noexcept {
-  if (has(EffectKind::drift)) {
-    const auto& q = p(EffectKind::drift);
-    y -= q[0] + q[1] * std::max((static_cast<double>(sample_) + ahead) * Ts_ - q[2], 0.0);
-  }
+  if (has(EffectKind::drift)) y -= drift_um(p(EffectKind::drift), (static_cast<double>(sample_) + ahead) * Ts_);
   return saturation_inverse(y);
 }
 

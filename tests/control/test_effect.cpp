@@ -187,6 +187,18 @@ TEST(AugmentedPlant, DriftIsAnInputIndependentRampAfterItsOnset) {
   }
 }
 
+TEST(AugmentedPlant, ASettlingDriftApproachesRateTimesItsSettlingTime) {
+  // Thermal settling: offset, then from the onset rate * tau (1 - exp(-(t - onset) / tau)).
+  const Effect e{EffectKind::drift, {0.2, 0.05, 1.0, 0.5}};
+  const auto u = voltage(4000);
+  const auto y = run(e, u, u[0]), y0 = run({}, u, u[0]);
+  for (size_t k = 0; k < u.size(); ++k) {
+    const double after = std::max(static_cast<double>(k) * Ts - 1.0, 0.0);
+    ASSERT_NEAR(y[k] - y0[k], 0.2 + 0.05 * 0.5 * (1.0 - std::exp(-after / 0.5)), 1e-9) << k;
+  }
+  EXPECT_NEAR(y.back() - y0.back(), 0.2 + 0.025, 1e-4);  // 6 settling times after the onset: settled
+}
+
 TEST(AugmentedPlant, BiasDependentDynamicsAreSlowerAtHigherDisplacement) {
   const Effect e{EffectKind::bias_dependent_dynamics, {1.0}};
   const auto u = steps(60000, 0.0, 500.0);
@@ -300,6 +312,20 @@ std::string parse_error(const std::string& text) {
     return e.key();
   }
   return "no error";
+}
+
+TEST(Effect, ADriftWithoutASettlingTimeIsTheRampOfOlderFiles) {
+  const auto specs = parameter_specs(EffectKind::drift, DataScale{});
+  ASSERT_EQ(specs.size(), 4u);
+  EXPECT_EQ(specs[3].name, "settling_time_s");
+  EXPECT_EQ(specs[3].default_value, 0.0);
+  const auto drift = parse_effects("[[sim.truth.effect]]\nname = \"drift\"\noffset_um = 0.1\nrate_um_per_s = 0.2\nonset_s = 0\n");
+  ASSERT_EQ(drift.size(), 1u);
+  EXPECT_EQ(drift[0].p[3], 0.0);
+  EXPECT_DOUBLE_EQ(drift_um(drift[0].p, 30.0), 0.1 + 0.2 * 30.0);
+  // The fit reaches a ramp within its bounds: a settling time a thousand recordings long bends it by 0.05%.
+  const std::array<double, kMaxEffectParams> long_settling{0.0, 1.0, 0.0, 1e3 * DataScale{}.duration_s};
+  EXPECT_NEAR(drift_um(long_settling, DataScale{}.duration_s), DataScale{}.duration_s, 1e-3 * DataScale{}.duration_s);
 }
 
 TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
