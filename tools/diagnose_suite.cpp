@@ -186,6 +186,7 @@ struct CaseOutcome {
   std::string leaders;  ///< the three best fitted candidates and the share of the excess each leaves
   std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
   std::string withheld;   ///< DiagnosisResult::withheld_second
+  bool widened = false;   ///< NominalRefit::widened
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
 };
 
@@ -222,6 +223,7 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.leaders = leaders_text(d);
     o.at_bounds = join(d.nominal_refit.at_bounds, ",");
     o.withheld = d.withheld_second;
+    o.widened = d.nominal_refit.widened;
   } catch (const std::exception& e) {
     o.verdict = "error";
     o.error = e.what();
@@ -261,10 +263,10 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     const auto& c = cases[i];
     const auto& o = out[i];
     char line[960];
-    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s\n",
+    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s\n",
                   c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
                   scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(),
-                  o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
+                  o.widened ? "  widened" : "", o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
                   o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(), o.error.empty() ? "" : "  error: ",
                   o.error.c_str());
     const std::lock_guard lock(log_mutex);
@@ -278,6 +280,8 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     r.max_case_s = std::max(r.max_case_s, o.seconds);
     time_sum += o.seconds;
     r.refit_at_bound += !o.at_bounds.empty();
+    r.widened += o.widened;
+    r.widened_right += o.widened && scored_right(c, o);
     (o.at_bounds.empty() ? r.refit_inside_right : r.refit_at_bound_right) += scored_right(c, o);
     const bool single_label = c.effects.find('+') == std::string::npos;
     r.false_second += single_label && o.mixture.find('+') != std::string::npos;
@@ -332,12 +336,13 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "  against the nominal with offset and start state fitted: worst %.3f\n"
                 "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
                 "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
-                "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n",
+                "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
+                "refit widened (not none, and the nuisance-only refit's gain stopped at its ordinary tolerance): %d cases, %d of them right\n",
                 r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed, r.single_correct, r.single_cases, acc,
                 acc / 95.0, r.false_alarms, r.none_cases, fa, fa / 2.0, r.mixture_both_named, r.mixture_cases, both,
                 both / 80.0, r.mixture_dominant_correct, r.mixture_cases, mean, median, worst, worst / 0.5, worst_aligned, r.mean_case_s,
                 r.max_case_s, r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
-                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true);
+                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right);
   return s + b;
 }
 

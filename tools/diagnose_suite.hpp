@@ -59,6 +59,8 @@ struct DirectorySuiteResult {
   /// Single-effect and none cases that name a second effect (a false one by the labels); cases with a
   /// second effect withheld (DiagnosisResult::withheld_second), and how many of those the labels hold.
   int false_second = 0, withheld = 0, withheld_true = 0;
+  /// Cases diagnosed with the widened refit (NominalRefit::widened), and how many of them were scored right.
+  int widened = 0, widened_right = 0;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

@@ -134,11 +134,12 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
   if (time_scale) {
-    const double t = o.time_scale_tolerance, f = o.poly_shape_tolerance;
+    const double t = o.time_scale_tolerance;
     const bool loop = std::find(kinds.begin(), kinds.end(), EffectKind::hysteresis) != kinds.end();
     specs.push_back({"time_scale", loop ? std::min(o.hysteresis_time_scale_min, 1.0 / (1.0 + t)) : 1.0 / (1.0 + t), 1.0 + t,
                      true, {1.0}});
-    specs.push_back({"poly_shape", 1.0 - f, 1.0 + f, false, {1.0}});
+    const auto [shape_lo, shape_hi] = poly_shape_bounds(o);
+    specs.push_back({"poly_shape", shape_lo, shape_hi, false, {1.0}});
     // The next odd term, as its slope at the largest recorded |u| over f's mean slope f(u)/u there:
     // bounded (0.5) so the refitted f stays increasing wherever f's own slope there is at least half its
     // mean slope (any linear or convex f).
@@ -198,7 +199,7 @@ struct Prediction {
 class Problem {
  public:
   Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
-          double gain_tolerance, double f_increasing_up_to_V)
+          double gain_tolerance, double f_increasing_up_to_V, double f_increasing_margin)
       : model_(m), data_(d), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
@@ -208,7 +209,7 @@ class Problem {
     initial_V_.assign(d.size(), NAN);
     for (const auto& s : d)
       for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
-    u_keep_ = std::max(2.0 * u_ref_, f_increasing_up_to_V);
+    u_keep_ = std::max(f_increasing_margin * u_ref_, f_increasing_up_to_V);
   }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
@@ -1659,9 +1660,14 @@ Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vec
                           Nominal& k) {
   k = refit_nominal(problem, o);
   auto refit = problem.predict({}, k, true);
-  res.nominal_refit = {refit.gain, k.time_scale, k.shape, k.next, problem.next_coefficient(k.next, k.shape),
-                       errors_of(data, refit.y, res.held_out), {}};
-  res.nominal_refit.at_bounds = refit_at_bounds(res.nominal_refit, o, false);
+  auto& r = res.nominal_refit;
+  r.gain = refit.gain;
+  r.time_scale = k.time_scale;
+  r.poly_shape = k.shape;
+  r.poly_next_slope = k.next;
+  r.poly_next = problem.next_coefficient(k.next, k.shape);
+  r.errors = errors_of(data, refit.y, res.held_out);
+  r.at_bounds = refit_at_bounds(r, o, false);
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
@@ -1699,9 +1705,23 @@ std::vector<std::string> refit_at_bounds(const NominalRefit& r, const DiagnosisO
   std::vector<std::string> names;
   if (at(r.gain, 1.0 / g, g, 1.0)) names.emplace_back("gain");
   if (at(r.time_scale, t_lo, t, 1.0)) names.emplace_back("time_scale");
-  if (at(r.poly_shape, 1.0 - o.poly_shape_tolerance, 1.0 + o.poly_shape_tolerance, 1.0)) names.emplace_back("poly_shape");
+  const auto [shape_lo, shape_hi] = poly_shape_bounds(o);
+  if (at(r.poly_shape, shape_lo, shape_hi, 1.0)) names.emplace_back("poly_shape");
   if (at(r.poly_next_slope, -o.poly_next_tolerance, o.poly_next_tolerance, 0.0)) names.emplace_back("poly_next_slope");
   return names;
+}
+
+std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& o) {
+  const double tol = o.poly_shape_tolerance;
+  return {tol < 1.0 ? 1.0 - tol : 1.0 / (1.0 + tol), 1.0 + tol};
+}
+
+DiagnosisOptions widened_tolerances(DiagnosisOptions o) {
+  o.gain_tolerance = std::max(o.gain_tolerance, 1.0);
+  o.poly_shape_tolerance = std::max(o.poly_shape_tolerance, 3.0);
+  o.poly_next_tolerance = std::max(o.poly_next_tolerance, 3.0);
+  o.f_increasing_margin = std::min(o.f_increasing_margin, 1.05);
+  return o;
 }
 
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
@@ -1709,29 +1729,55 @@ double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
   return excess.base > 0.0 ? excess(e) / excess.base : NAN;
 }
 
+namespace {
+
+/// When the nuisance-only refit's gain stops at its tolerance, the nominal's static curve is off by more
+/// than a recalibration: its parameters at their tolerance (the gain and f's terms), else none. f's shape
+/// alone at its bound is not enough: there a dead zone or a saturation may be what bends the curve, and on
+/// the tuning set, widening on it turned an asymmetric-dynamics case into a mode and two `none` cases into effects.
+std::vector<std::string> static_curve_off(const NominalRefit& r) {
+  std::vector<std::string> off;
+  if (std::find(r.at_bounds.begin(), r.at_bounds.end(), "gain") == r.at_bounds.end()) return off;
+  for (const auto& b : r.at_bounds)
+    if (b == "gain" || b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
+  return off;
+}
+
+}  // namespace
+
 std::string_view loop_start_name(double branch) noexcept {
   return branch > 0.0 ? "rising" : branch < 0.0 ? "falling" : "virgin";
 }
 
-DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o) {
+DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
   check_inputs(model, data);
   std::optional<SecondPass> second;
   int first_pass_simulations = 0;
+  DiagnosisOptions o = options;  // the tolerances in force
+  std::vector<std::string> widened_from;
   for (;;) {
     DiagnosisResult res;
     for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-    Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V);
+    Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V, o.f_increasing_margin);
     const DataScale scale = align_and_baseline(res, problem, data, o, second);
     Nominal k;
     auto refit = refit_and_test(res, problem, data, o, k);
-    if (!decide_none(res, refit, o)) {
+    const bool none = decide_none(res, refit, o);
+    if (!none && widened_from.empty() && o.widen_off_nominal && !(widened_from = static_curve_off(res.nominal_refit)).empty()) {
+      o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
+      first_pass_simulations += problem.simulations();
+      continue;
+    }
+    res.nominal_refit.widened = !widened_from.empty();
+    res.nominal_refit.widened_from = widened_from;
+    if (!none) {
       // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;
       // 5. the verdict.
       fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(),
                      second ? &second->candidates : nullptr);
       if (const auto d = second ? std::nullopt : leader_delay(res, problem, data, scale, o)) {
         second = SecondPass{res.alignment, res.candidates, *d, std::string(to_string(res.candidates[0].effect.kind))};
-        first_pass_simulations = problem.simulations();
+        first_pass_simulations += problem.simulations();
         continue;
       }
       decide(res, problem, data, scale, o);

@@ -38,10 +38,16 @@ struct DiagnosisOptions {
   /// with the earlier shape (spread 0) by this share; below it the two-parameter loop is reported.
   double hysteresis_shape_min_gain = 0.25;
   double poly_shape_tolerance = 0.1;  ///< nominal refit: f's coefficients above the linear one scaled within 1 +- tol
+                                      ///< (from 1 on, within [1 / (1 + tol), 1 + tol]: widened_tolerances)
   double poly_next_tolerance = 0.5;   ///< nominal refit: f gains one odd term of the next order whose slope at the
                                       ///< largest recorded |u| is within +- tol of f's mean slope f(u)/u there
   double f_increasing_up_to_V = 0.0;  ///< a negative added f term keeps f increasing up to this voltage (the
-                                      ///< controller's range; at least twice the largest recorded |u|)
+                                      ///< controller's range; at least f_increasing_margin times the largest recorded |u|)
+  double f_increasing_margin = 2.0;   ///< see f_increasing_up_to_V
+  /// When the data are not `none` and the nuisance-only refit's gain stops at its tolerance, the nominal
+  /// model's static curve is further off than a recalibration (a nominal identified with another polynomial
+  /// order): the diagnosis then runs again with widened_tolerances, so that error is not blamed on an effect.
+  bool widen_off_nominal = true;
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
@@ -123,6 +129,10 @@ struct NominalRefit {
   /// The parameters above that stop at their tolerance (refit_at_bounds), by JSON key: those fitted with
   /// the named effects when there are any, else the nuisance-only refit's.
   std::vector<std::string> at_bounds;
+  /// The tolerances were widened (DiagnosisOptions::widen_off_nominal); `widened_from` names the parameters
+  /// of the nuisance-only refit that stopped at the ordinary ones.
+  bool widened = false;
+  std::vector<std::string> widened_from;
 };
 
 /// The statistical `none` test on the residual of the nuisance-only refit.
@@ -184,6 +194,15 @@ void check_series(const Series& s, const HammersteinModel& model);
 /// it, and the effects may stand in for part of that model error; a nuisance-only refit may also stop
 /// there because it absorbs what an effect would explain.
 std::vector<std::string> refit_at_bounds(const NominalRefit& refit, const DiagnosisOptions& options, bool with_loop);
+
+/// The tolerances of the refit when the nominal's static curve is far off: gain within [0.5, 2], f's shape
+/// within [0.25, 4], f's next term's slope share within +-3, f kept increasing only to 1.05 times the largest
+/// recorded |u| (or the file's controller range): the n = 2 polynomial of one identification refits to the
+/// n = 3 polynomial of another, which turns over just above the recorded voltages.
+DiagnosisOptions widened_tolerances(DiagnosisOptions options);
+
+/// f's shape bounds of the refit: 1 -+ tol below a tolerance of 1, [1 / (1 + tol), 1 + tol] from 1 on.
+std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& options);
 
 /// Simulates `model` (with `effect`) from each recording's u, output error,
 /// from rest at the voltage whose steady state matches the mean of the first

@@ -69,10 +69,37 @@ TEST(NominalRefit, ARigBeyondTheGainToleranceStopsTheRefitAtItsBoundAndSaysSo) {
   // named on top of the refit may stand in for that model error, so the diagnosis must say it stopped.
   Series s = recording({}, 0.05);
   for (double& y : s.y_um) y *= 1.5;
-  const auto r = diagnose(paper_model(3), {s});
+  DiagnosisOptions narrow;
+  narrow.widen_off_nominal = false;
+  const auto r = diagnose(paper_model(3), {s}, narrow);
   const auto& b = r.nominal_refit.at_bounds;
   EXPECT_NE(std::find(b.begin(), b.end(), "gain"), b.end()) << r.explanation;
   EXPECT_NE(r.verdict, "none");
+  EXPECT_FALSE(r.nominal_refit.widened);
+  // By default the refit is widened instead (gain within 0.5..2), says why, and the data need no effect.
+  const auto wide = diagnose(paper_model(3), {s});
+  EXPECT_TRUE(wide.nominal_refit.widened);
+  const auto& from = wide.nominal_refit.widened_from;  // f's shape also goes as far as it may toward the gain
+  EXPECT_NE(std::find(from.begin(), from.end(), "gain"), from.end());
+  EXPECT_NEAR(wide.nominal_refit.gain, 1.5, 0.01);
+  EXPECT_EQ(wide.verdict, "none") << wide.explanation;
+}
+
+TEST(Diagnose, ANominalOfAnotherPolynomialOrderIsRefittedWiderAndNotBlamedOnAnEffect) {
+  // The nominal is the paper's n = 2 identification (Table II), the rig follows its n = 3 one: after the
+  // gain, their cubic shares differ 2.9x, far beyond f's ordinary shape tolerance of 10%. The refit stops
+  // there, so the diagnosis runs with widened tolerances and finds the n = 3 curve instead of an effect.
+  const auto s = recording({}, 0.05, 7);
+  const auto r = diagnose(paper_model(2), {s});
+  EXPECT_TRUE(r.nominal_refit.widened);
+  const auto& from = r.nominal_refit.widened_from;
+  EXPECT_NE(std::find(from.begin(), from.end(), "poly_shape"), from.end());
+  EXPECT_EQ(r.verdict, "none") << r.explanation;
+  // The gain and shape that turn the n = 2 curve's first two terms into the n = 3 one's: 0.0721 / 0.1270 and
+  // (2.1307e-5 / 1.3057e-5) / that, within what the added fifth-order term and the noise trade off.
+  EXPECT_NEAR(r.nominal_refit.gain, 0.568, 0.1);
+  EXPECT_NEAR(r.nominal_refit.poly_shape, 2.87, 0.6);
+  EXPECT_LT(r.nominal_refit.poly_next_slope, 0.0);
 }
 
 TEST(Diagnose, TasksRunInAnyOrderGiveTheSameResult) {
