@@ -63,12 +63,12 @@ std::string at_bounds_note(const DiagnosisResult& r) {
 /// Why the refit ran with widened tolerances, and with which (DiagnosisOptions::widen_off_nominal).
 std::string widened_note(const DiagnosisResult& r) {
   const DiagnosisOptions ordinary, wide = widened_tolerances(ordinary);
-  const auto [lo, hi] = poly_shape_bounds(wide);
+  const auto range = [](std::pair<double, double> b) { return format("%.3g", b.first) + ".." + format("%.3g", b.second); };
+  const auto gain = [](const DiagnosisOptions& o) { return std::pair{1.0 / (1.0 + o.gain_tolerance), 1.0 + o.gain_tolerance}; };
   return "the nuisance-only refit stopped at its ordinary tolerance on " + join(r.nominal_refit.widened_from, ", ") +
-         " (gain within +-" + format("%.0f", 100.0 * ordinary.gain_tolerance) + "%, f's shape within +-" +
-         format("%.0f", 100.0 * ordinary.poly_shape_tolerance) + "%): the nominal model's static curve is further off, so "
-         "the analysis ran with the gain within " + format("%.2g", 1.0 / (1.0 + wide.gain_tolerance)) + ".." +
-         format("%.2g", 1.0 + wide.gain_tolerance) + ", f's shape within " + format("%.2g", lo) + ".." + format("%.2g", hi) +
+         " (gain within " + range(gain(ordinary)) + ", f's shape within " + range(poly_shape_bounds(ordinary)) +
+         "): the nominal model's static curve is further off, so the analysis ran with the gain within " +
+         range(gain(wide)) + ", f's shape within " + range(poly_shape_bounds(wide)) +
          " and its next term's slope share within +-" + format("%.2g", wide.poly_next_tolerance) + " (f kept increasing to " +
          format("%.3g", wide.f_increasing_margin) + "x the largest recorded voltage); re-identify the nominal model (pvcgel ident)";
 }
