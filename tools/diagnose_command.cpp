@@ -64,11 +64,10 @@ std::string at_bounds_note(const DiagnosisResult& r) {
 std::string widened_note(const DiagnosisResult& r) {
   const DiagnosisOptions ordinary, wide = widened_tolerances(ordinary);
   const auto range = [](std::pair<double, double> b) { return format("%.3g", b.first) + ".." + format("%.3g", b.second); };
-  const auto gain = [](const DiagnosisOptions& o) { return std::pair{1.0 / (1.0 + o.gain_tolerance), 1.0 + o.gain_tolerance}; };
   return "the nuisance-only refit stopped at its ordinary tolerance on " + join(r.nominal_refit.widened_from, ", ") +
-         " (gain within " + range(gain(ordinary)) + ", f's shape within " + range(poly_shape_bounds(ordinary)) +
+         " (gain within " + range(gain_bounds(ordinary)) + ", f's shape within " + range(poly_shape_bounds(ordinary)) +
          "): the nominal model's static curve is further off, so the analysis ran with the gain within " +
-         range(gain(wide)) + ", f's shape within " + range(poly_shape_bounds(wide)) +
+         range(gain_bounds(wide)) + ", f's shape within " + range(poly_shape_bounds(wide)) +
          " and its next term's slope share within +-" + format("%.2g", wide.poly_next_tolerance) + " (f kept increasing to " +
          format("%.3g", wide.f_increasing_margin) + "x the largest recorded voltage); re-identify the nominal model (pvcgel ident)";
 }
@@ -216,7 +215,7 @@ std::string report_markdown(const DiagnosisResult& r, const std::vector<std::str
   md << "| augmented model | " << number_or_null(r.fitted.rmse_um, "%.4f") << " | " << number_or_null(r.fitted.rmse_fit_um, "%.4f") << " | "
      << number_or_null(r.fitted.rmse_validation_um, "%.4f") << " |\n\nSensor noise estimated from the data: "
      << number_or_null(r.noise_sigma_um, "%.4f") << " um.\n\n";
-  if (r.nominal_refit.widened) md << "**Note:** " << widened_note(r) << ".\n\n";
+  if (r.nominal_refit.widened()) md << "**Note:** " << widened_note(r) << ".\n\n";
   if (!r.nominal_refit.at_bounds.empty()) md << "**Note:** " << at_bounds_note(r) << ".\n\n";
   if (!model_path.empty()) md << "Augmented model (daemon-loadable): `" << model_path << "`\n\n";
   md << "## Where the model disagrees\n\n";
@@ -402,7 +401,7 @@ std::string extension_json(const DiagnosisResult& r) {
     << ", \"poly_shape\": " << number_or_null(n.poly_shape) << ", \"poly_next\": " << number_or_null(n.poly_next)
     << ", \"poly_next_slope\": " << number_or_null(n.poly_next_slope)
     << ", \"rmse_um\": " << number_or_null(n.errors.rmse_um) << ", \"rmse_validation_um\": " << number_or_null(n.errors.rmse_validation_um)
-    << ", \"at_bounds\": " << quoted_array(n.at_bounds) << ", \"widened\": " << (n.widened ? "true" : "false")
+    << ", \"at_bounds\": " << quoted_array(n.at_bounds) << ", \"widened\": " << (n.widened() ? "true" : "false")
     << ", \"widened_from\": " << quoted_array(n.widened_from) << "},\n";
   const auto& t = r.none_test;
   j << "  \"none_test\": {\"false_alarm_rate\": " << number_or_null(t.false_alarm_rate) << ", \"windows\": " << t.windows
@@ -524,7 +523,7 @@ std::string summary_text(const DiagnosisResult& r, const DiagnoseArgs& a, const 
   s << "nominal refit (" << (r.mixture.empty() ? "nuisance only" : "with the named effects") << "): gain " << number_or_null(r.nominal_refit.gain, "%.4g") << ", G time scale "
     << number_or_null(r.nominal_refit.time_scale, "%.4g") << ", f shape " << number_or_null(r.nominal_refit.poly_shape, "%.4g") << ", f next-term slope share "
     << number_or_null(r.nominal_refit.poly_next_slope, "%.3g") << ", held-out (nuisance only) " << number_or_null(r.nominal_refit.errors.rmse_validation_um, "%.4f") << " um\n";
-  if (r.nominal_refit.widened) s << "  NOTE: " << widened_note(r) << "\n";
+  if (r.nominal_refit.widened()) s << "  NOTE: " << widened_note(r) << "\n";
   if (!r.nominal_refit.at_bounds.empty()) s << "  NOTE: " << at_bounds_note(r) << "\n";
   if (r.mixture.size() > 1) s << "mixture: " << to_string(r.mixture[0].kind) << " (dominant) + " << to_string(r.mixture[1].kind) << "\n";
   if (!r.withheld_second.empty())

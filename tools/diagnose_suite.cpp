@@ -223,7 +223,7 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.leaders = leaders_text(d);
     o.at_bounds = join(d.nominal_refit.at_bounds, ",");
     o.withheld = d.withheld_second;
-    o.widened = d.nominal_refit.widened;
+    o.widened = d.nominal_refit.widened();
   } catch (const std::exception& e) {
     o.verdict = "error";
     o.error = e.what();

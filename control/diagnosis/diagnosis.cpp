@@ -198,9 +198,10 @@ struct Prediction {
 /// blamed for a start not at rest, an offset or a gain error.
 class Problem {
  public:
+  /// The refit's gain bounds and how far f must stay increasing come from `o`.
   Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
-          double gain_tolerance, double f_increasing_up_to_V, double f_increasing_margin)
-      : model_(m), data_(d), gain_lo_(1.0 / (1.0 + gain_tolerance)), gain_hi_(1.0 + gain_tolerance) {
+          const DiagnosisOptions& o)
+      : model_(m), data_(d), gain_(gain_bounds(o)) {
     for (const auto& mask : held_out) {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
       fit_ranges_.push_back(fit_ranges(mask));
@@ -209,7 +210,7 @@ class Problem {
     initial_V_.assign(d.size(), NAN);
     for (const auto& s : d)
       for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
-    u_keep_ = std::max(f_increasing_margin * u_ref_, f_increasing_up_to_V);
+    u_keep_ = std::max(o.f_increasing_margin * u_ref_, o.f_increasing_up_to_V);
   }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
@@ -294,7 +295,7 @@ class Problem {
   double io_ = 1.0;
   double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
   double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
-  double gain_lo_, gain_hi_;
+  std::pair<double, double> gain_;  ///< the refit's gain bounds
   size_t n_fit_ = 0;
   int simulations_ = 0;
   // Two time scales cached: a Jacobian's time-scale column alternates with its base point.
@@ -409,7 +410,7 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     den += hh - ph.dot(u_h[r]);
   }
   Prediction p;
-  p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_lo_, gain_hi_) : 1.0;
+  p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_.first, gain_.second) : 1.0;
   for (size_t r = 0; r < R; ++r) {
     const auto& m = basis_r[r].modes;
     const Eigen::VectorXd c = basis_r[r].data_coefficients - p.gain * u_h[r];
@@ -1700,10 +1701,11 @@ std::vector<std::string> refit_at_bounds(const NominalRefit& r, const DiagnosisO
   const auto at = [](double v, double lo, double hi, double nominal) {
     return std::abs(v - lo) <= 0.01 * (nominal - lo) || std::abs(hi - v) <= 0.01 * (hi - nominal);
   };
-  const double g = 1.0 + o.gain_tolerance, t = 1.0 + o.time_scale_tolerance;
+  const double t = 1.0 + o.time_scale_tolerance;
   const double t_lo = with_loop ? std::min(o.hysteresis_time_scale_min, 1.0 / t) : 1.0 / t;
   std::vector<std::string> names;
-  if (at(r.gain, 1.0 / g, g, 1.0)) names.emplace_back("gain");
+  const auto [gain_lo, gain_hi] = gain_bounds(o);
+  if (at(r.gain, gain_lo, gain_hi, 1.0)) names.emplace_back("gain");
   if (at(r.time_scale, t_lo, t, 1.0)) names.emplace_back("time_scale");
   const auto [shape_lo, shape_hi] = poly_shape_bounds(o);
   if (at(r.poly_shape, shape_lo, shape_hi, 1.0)) names.emplace_back("poly_shape");
@@ -1714,6 +1716,10 @@ std::vector<std::string> refit_at_bounds(const NominalRefit& r, const DiagnosisO
 std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& o) {
   const double tol = o.poly_shape_tolerance;
   return {tol < 1.0 ? 1.0 - tol : 1.0 / (1.0 + tol), 1.0 + tol};
+}
+
+std::pair<double, double> gain_bounds(const DiagnosisOptions& o) {
+  return {1.0 / (1.0 + o.gain_tolerance), 1.0 + o.gain_tolerance};
 }
 
 DiagnosisOptions widened_tolerances(DiagnosisOptions o) {
@@ -1758,17 +1764,19 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   for (;;) {
     DiagnosisResult res;
     for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
-    Problem problem(model, data, res.held_out, o.gain_tolerance, o.f_increasing_up_to_V, o.f_increasing_margin);
+    Problem problem(model, data, res.held_out, o);
     const DataScale scale = align_and_baseline(res, problem, data, o, second);
     Nominal k;
     auto refit = refit_and_test(res, problem, data, o, k);
     const bool none = decide_none(res, refit, o);
-    if (!none && widened_from.empty() && o.widen_off_nominal && !(widened_from = static_curve_off(res.nominal_refit)).empty()) {
-      o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
-      first_pass_simulations += problem.simulations();
-      continue;
+    if (!none && o.widen_off_nominal && widened_from.empty()) {
+      widened_from = static_curve_off(res.nominal_refit);
+      if (!widened_from.empty()) {
+        o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
+        first_pass_simulations += problem.simulations();
+        continue;
+      }
     }
-    res.nominal_refit.widened = !widened_from.empty();
     res.nominal_refit.widened_from = widened_from;
     if (!none) {
       // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;

@@ -129,10 +129,10 @@ struct NominalRefit {
   /// The parameters above that stop at their tolerance (refit_at_bounds), by JSON key: those fitted with
   /// the named effects when there are any, else the nuisance-only refit's.
   std::vector<std::string> at_bounds;
-  /// The tolerances were widened (DiagnosisOptions::widen_off_nominal); `widened_from` names the parameters
-  /// of the nuisance-only refit that stopped at the ordinary ones.
-  bool widened = false;
+  /// The parameters of the nuisance-only refit that stopped at the ordinary tolerances when the diagnosis
+  /// widened them (DiagnosisOptions::widen_off_nominal); empty when it did not.
   std::vector<std::string> widened_from;
+  [[nodiscard]] bool widened() const noexcept { return !widened_from.empty(); }
 };
 
 /// The statistical `none` test on the residual of the nuisance-only refit.
@@ -203,6 +203,9 @@ DiagnosisOptions widened_tolerances(DiagnosisOptions options);
 
 /// f's shape bounds of the refit: 1 -+ tol below a tolerance of 1, [1 / (1 + tol), 1 + tol] from 1 on.
 std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& options);
+
+/// The overall gain's bounds of the refit: [1 / (1 + tol), 1 + tol].
+std::pair<double, double> gain_bounds(const DiagnosisOptions& options);
 
 /// Simulates `model` (with `effect`) from each recording's u, output error,
 /// from rest at the voltage whose steady state matches the mean of the first

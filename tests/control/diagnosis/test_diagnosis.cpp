@@ -75,10 +75,10 @@ TEST(NominalRefit, ARigBeyondTheGainToleranceStopsTheRefitAtItsBoundAndSaysSo) {
   const auto& b = r.nominal_refit.at_bounds;
   EXPECT_NE(std::find(b.begin(), b.end(), "gain"), b.end()) << r.explanation;
   EXPECT_NE(r.verdict, "none");
-  EXPECT_FALSE(r.nominal_refit.widened);
+  EXPECT_FALSE(r.nominal_refit.widened());
   // By default the refit is widened instead (gain within 0.5..2), says why, and the data need no effect.
   const auto wide = diagnose(paper_model(3), {s});
-  EXPECT_TRUE(wide.nominal_refit.widened);
+  EXPECT_TRUE(wide.nominal_refit.widened());
   const auto& from = wide.nominal_refit.widened_from;  // f's shape also goes as far as it may toward the gain
   EXPECT_NE(std::find(from.begin(), from.end(), "gain"), from.end());
   EXPECT_NEAR(wide.nominal_refit.gain, 1.5, 0.01);
@@ -91,7 +91,7 @@ TEST(Diagnose, ANominalOfAnotherPolynomialOrderIsRefittedWiderAndNotBlamedOnAnEf
   // there, so the diagnosis runs with widened tolerances and finds the n = 3 curve instead of an effect.
   const auto s = recording({}, 0.05, 7);
   const auto r = diagnose(paper_model(2), {s});
-  EXPECT_TRUE(r.nominal_refit.widened);
+  EXPECT_TRUE(r.nominal_refit.widened());
   const auto& from = r.nominal_refit.widened_from;
   EXPECT_NE(std::find(from.begin(), from.end(), "poly_shape"), from.end());
   EXPECT_EQ(r.verdict, "none") << r.explanation;
