@@ -141,13 +141,13 @@ DiscreteTransferFunction Controller::design_plant(ControllerMode m) const {
 }
 
 double Controller::linear_input_for(double voltage_V, ControllerMode m) const noexcept {
-  const double w = model_.f(comp_.effective_input(voltage_V));
+  const double w = drive_for(voltage_V);
   return m == ControllerMode::inverse_pid_dob_ff ? correction_.forward(w) : w;
 }
 
 double Controller::voltage_for(double v, ControllerMode m) const noexcept {
   const double w = m == ControllerMode::inverse_pid_dob_ff ? correction_.inverse(v) : v;
-  return comp_.voltage_for(inverse_(w, output_.last_V()));
+  return comp_.voltage_for(inverse_(comp_.drive_inverse(w), output_.last_V()));
 }
 
 double Controller::law_offset(ControllerMode m, const Sample& s) noexcept {
@@ -162,11 +162,11 @@ double Controller::law_offset(ControllerMode m, const Sample& s) noexcept {
 
 void Controller::reset_steady_state(double r0) noexcept {
   comp_.reset_steady_state(output_.last_V());  // the drift's clock restarts before r0 is mapped
-  const double x0 = std::clamp(inverse_(comp_.rest_linear_input(r0, model_.G.dc_gain())), cfg_.voltage_min_V,
+  const double x0 = std::clamp(inverse_(comp_.drive_inverse(comp_.rest_linear_input(r0, model_.G.dc_gain()))), cfg_.voltage_min_V,
                                cfg_.voltage_max_V);
   const double u0 = std::clamp(comp_.rest_voltage_for(x0), cfg_.voltage_min_V, cfg_.voltage_max_V);
   comp_.reset_steady_state(u0);
-  const double w0 = model_.f(comp_.effective_input(u0));
+  const double w0 = drive_for(u0);
   comp_.reset_creep(w0);
   const double r0_lin = comp_.linear_output(r0);  // G(0) w0 unless r0 is out of reach
   const double v0 = r0_lin / model_.G.dc_gain();
@@ -228,7 +228,7 @@ std::pair<double, double> Controller::apply_law(const Sample& s, ControlOutput& 
 
 void Controller::commit(const Sample& s, double c, double applied_equivalent, double voltage_V) noexcept {
   pid_.commit(s.e_lin, c, applied_equivalent);
-  const double w_applied = model_.f(comp_.effective_input(voltage_V));
+  const double w_applied = drive_for(voltage_V);
   dob_.commit(mode_ == ControllerMode::inverse_pid_dob_ff ? correction_.forward(w_applied) : w_applied);
   correction_.commit(w_applied);
   comp_.commit(voltage_V, w_applied);
@@ -241,7 +241,7 @@ ControlOutput Controller::step(std::span<const double> preview, double y) noexce
     out.voltage_V = out.unclamped_V = output_.last_V();
     out.status = ControlOutput::Status::invalid_input;
     // The held voltage is applied: the effects' states see it.
-    comp_.commit(out.voltage_V, model_.f(comp_.effective_input(out.voltage_V)));
+    comp_.commit(out.voltage_V, drive_for(out.voltage_V));
     return out;
   }
   out.error_um = r - y;

@@ -158,6 +158,10 @@ class Controller final {
     double e_lin = 0.0;  ///< r_lin - y_lin, what the PID sees
     double v_ff = 0.0, d_hat = 0.0;
   };
+  /// G's input for voltage u now: f after the input-side effects, then a saturation on the drive.
+  [[nodiscard]] double drive_for(double voltage_V) const noexcept {
+    return comp_.drive(model_.f(comp_.effective_input(voltage_V)));
+  }
   [[nodiscard]] double linear_input_for(double voltage_V, ControllerMode m) const noexcept;
   [[nodiscard]] double voltage_for(double v, ControllerMode m) const noexcept;
   /// Terms added to the PID output in mode m (feedforward, minus the DOB's estimate).

@@ -84,6 +84,9 @@ struct DataScale {
   double sample_time_s = 1e-3;      ///< the longest sample time of the recordings
   double sample_time_min_s = 0.0;   ///< the shortest (0: the same); the delay line's length counts these
   double duration_s = 30.0;   ///< the longest recording
+  /// The earliest end of a recording's fit segment (s after its start; the rest is held out): a drift
+  /// that starts after it acts on held-out data alone, where nothing fitted it.
+  double fit_end_s = std::numeric_limits<double>::infinity();
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
   double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
@@ -145,6 +148,13 @@ inline double dead_zone(double u_V, double d_V, double w_V) noexcept {
   return std::copysign(a <= d_V ? 0.0 : (a <= d_V + w_V ? (a - d_V) * (d_V + w_V) / w_V : a), u_V);
 }
 
+/// The saturation effect's soft knee: |y| above `knee` softens as knee + e / sqrt(1 + (e / softness)^2)
+/// (odd: bipolar strokes), approaching knee + softness.
+inline double soft_saturation(double y, double knee, double softness) noexcept {
+  const double excess = std::abs(y) - knee;
+  return excess > 0.0 ? std::copysign(knee + excess / std::sqrt(1.0 + (excess / softness) * (excess / softness)), y) : y;
+}
+
 /// The slew-limit effect over one sample: the amplifier ramps from its state
 /// toward the command (difference e) at most `cap` volts per sample; returns
 /// the mean over the sample relative to the state (what the gel sees).
@@ -200,7 +210,10 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    branch, or (spread_decades > 0) three with fraction / 3 each at tau 10^(-spread/2, 0, +spread/2),
 ///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
 ///  - dead_zone: no response below threshold d, linear catch-up to u at 2 d;
-///  - saturation: |y| above a knee softens as knee + e / sqrt(1 + (e / Y)^2) (both signs: bipolar strokes);
+///  - saturation: |y| above a knee softens as knee + e / sqrt(1 + (e / Y)^2) (both signs: bipolar strokes,
+///    soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
+///    the static displacement G(0) f it would give (an amplifier or an actuator force that saturates: the
+///    displacement then approaches the limit with G's dynamics);
 ///  - delay: extra transport delay (fractional, linear interpolation);
 ///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing;
 ///  - slew_limit: the amplifier voltage changes at most S V/s;
@@ -250,7 +263,13 @@ class AugmentedPlant final {
   using Matrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxOrder, kMaxOrder>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxOrder, 1>;
 
-  [[nodiscard]] double nonlinearity(double x_V) const noexcept { return f_(std::clamp(x_V, -x_sat_, x_sat_)); }
+  /// f, then a saturation on the drive (on_drive), if any: G's input.
+  [[nodiscard]] double nonlinearity(double x_V) const noexcept {
+    const double w = f_(std::clamp(x_V, -x_sat_, x_sat_));
+    if (!saturate_drive_) return w;
+    const auto& q = p(EffectKind::saturation);
+    return soft_saturation(dc_gain_ * w, q[0], q[1]) / dc_gain_;
+  }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;
   /// x <- weight (A_i x + B_i w) + (1 - weight) (A_{i+1} x + B_{i+1} w): one grid entry, or two
@@ -273,6 +292,7 @@ class AugmentedPlant final {
   EffectKind time_scaling_ = EffectKind::none;  ///< asymmetric or bias-dependent dynamics, if either
   OddPolynomial f_;
   double x_sat_ = 1e300;
+  bool saturate_drive_ = false;  ///< the saturation acts on G's input (on_drive), not on the displacement
   double Ts_ = 1e-3;
   // Linear block (G, G with a creep branch, or G times a mode), discretised for
   // a grid of time scales when the effect changes the time scale.

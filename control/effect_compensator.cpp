@@ -68,6 +68,7 @@ EffectCompensator::EffectCompensator(const HammersteinModel& model, std::span<co
   if (has(EffectKind::hysteresis)) hysteresis_ = HysteresisOperator(p(EffectKind::hysteresis)[0], p(EffectKind::hysteresis)[1],
                                                                 p(EffectKind::hysteresis)[2]);
   if (has(EffectKind::slew_limit)) slew_step_V_ = p(EffectKind::slew_limit)[0] * Ts;
+  if (has(EffectKind::saturation) && p(EffectKind::saturation)[2] != 0.0) drive_dc_gain_ = model.G.dc_gain();
   if (has(EffectKind::delay)) {
     const double d = p(EffectKind::delay)[0] / Ts;
     delay_whole_ = static_cast<int>(std::floor(d + 1e-9));
@@ -213,9 +214,18 @@ double EffectCompensator::saturation_inverse(double y) const noexcept {
   return std::copysign(knee + out / std::sqrt(1.0 - (out / Y) * (out / Y)), y);
 }
 
+double EffectCompensator::drive(double w) const noexcept {
+  if (drive_dc_gain_ == 0.0) return w;
+  return soft_saturation(drive_dc_gain_ * w, p(EffectKind::saturation)[0], p(EffectKind::saturation)[1]) / drive_dc_gain_;
+}
+
+double EffectCompensator::drive_inverse(double w) const noexcept {
+  return drive_dc_gain_ == 0.0 ? w : saturation_inverse(drive_dc_gain_ * w) / drive_dc_gain_;
+}
+
 double EffectCompensator::output_side_inverse(double y, double ahead) const noexcept {
   if (has(EffectKind::drift)) y -= drift_um(p(EffectKind::drift), (static_cast<double>(sample_) + ahead) * Ts_);
-  return saturation_inverse(y);
+  return drive_dc_gain_ == 0.0 ? saturation_inverse(y) : y;
 }
 
 double EffectCompensator::linear_output(double y, double ahead) const noexcept {

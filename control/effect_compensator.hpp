@@ -54,6 +54,8 @@ class HysteresisOperator final {
 ///    inverses, applied after f^-1 in the order opposite to the plant's
 ///    (plant: slew limit -> dead zone -> hysteresis -> f), with the states
 ///    (plays, amplifier ramp) advanced by the voltage actually applied;
+///  - saturation on the drive (on_drive): between f and G, its exact inverse
+///    (drive_inverse) taken on the linear block's input before f^-1;
 ///  - saturation and drift (output side): reference and measurement are both
 ///    mapped to the linear block's output, y_lin = sat^-1(y - drift(t)), so the
 ///    PID, the DOB and the feedforward work on the model they were designed
@@ -108,6 +110,11 @@ class EffectCompensator final {
   [[nodiscard]] double effective_input(double u_V) const noexcept;
   /// The voltage for which effective_input(u) == x (within the amplifier's reach).
   [[nodiscard]] double voltage_for(double x_V) const noexcept;
+  /// The linear block's input for f's output w: a saturation on the drive, else w.
+  [[nodiscard]] double drive(double w) const noexcept;
+  /// f's output that gives the linear block's input w (drive's inverse; a request beyond the
+  /// saturation's ceiling is read as 95% of the way there, as on the output side).
+  [[nodiscard]] double drive_inverse(double w) const noexcept;
   /// The voltage at rest that gives effective input x (reset_steady_state).
   [[nodiscard]] double rest_voltage_for(double x_V) const noexcept;
   /// Advance the states with the voltage applied this cycle, w = f(effective_input(u))
@@ -135,6 +142,7 @@ class EffectCompensator final {
   }
   [[nodiscard]] double slew_forward(double u_V) const noexcept;
   [[nodiscard]] double slew_inverse(double x_V) const noexcept;
+  /// The saturation's inverse on a displacement (output side) or a static displacement G(0) w (the drive).
   [[nodiscard]] double saturation_inverse(double y_um) const noexcept;
   /// S^-1(y - drift) at `ahead` samples from now.
   [[nodiscard]] double output_side_inverse(double y_um, double ahead) const noexcept;
@@ -154,6 +162,7 @@ class EffectCompensator final {
   HysteresisOperator hysteresis_;
   double Ts_ = 1e-3;
   double slew_state_V_ = 0.0, slew_step_V_ = 0.0;
+  double drive_dc_gain_ = 0.0;  ///< G(0) when the saturation acts on the drive, else 0
   int delay_whole_ = 0;
   double delay_fraction_ = 0.0;
   long sample_ = 0;

@@ -84,6 +84,15 @@ struct FitSpace {
     const size_t n = specs.size();
     return {to_p(n - 3, z(z.size() - 3)), to_p(n - 2, z(z.size() - 2)), to_p(n - 1, z(z.size() - 1))};
   }
+  /// Holds parameter i of `kind` at `value` (a choice fitted space by space: the saturation's placement).
+  void hold(EffectKind kind, size_t i, double value) {
+    for (size_t e = 0; e < kinds.size(); ++e)
+      if (kinds[e] == kind) {
+        auto& spec = specs[first[e] + i];
+        spec.lower = spec.upper = value;
+        spec.fixed = true;
+      }
+  }
   /// z of given effects (kinds in this order) and time scale.
   [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
     Eigen::VectorXd z(static_cast<Eigen::Index>(specs.size()));
@@ -719,8 +728,15 @@ NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vecto
 }
 
 /// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
-DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal) {
+DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal,
+                     const std::vector<std::vector<char>>& held_out) {
   DataScale d;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto& mask = held_out[r];
+    const auto last = std::find(mask.rbegin(), mask.rend(), 0);
+    const size_t end = last == mask.rend() ? 0 : static_cast<size_t>(mask.rend() - last) - 1;
+    d.fit_end_s = std::min(d.fit_end_s, data[r].t_s[end] - data[r].t_s.front());
+  }
   // The slowest rate bounds the mode frequency; the fastest the delay line (in samples).
   d.sample_time_s = 0.0;
   d.sample_time_min_s = INFINITY;
@@ -1036,6 +1052,9 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
     auto& spread = spaces.back().specs[2];
     spread.lower = spread.upper = 0.0;
     spread.fixed = true;
+  } else if (kind == EffectKind::saturation) {
+    spaces.push_back(spaces.front());
+    spaces.back().hold(EffectKind::saturation, 2, 1.0);  // on the drive
   }
   return spaces;
 }
@@ -1067,7 +1086,10 @@ StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& pro
 void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
                       const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
                       const DiagnosisOptions& o) {
-  const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - o.hysteresis_shape_min_gain) * best[1].cost ? 1 : 0;
+  // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
+  // (on the drive) is another placement, taken when it fits better.
+  const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
+  const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - gain_needed) * best[1].cost ? 1 : 0;
   c.effect = spaces[v].effects(best[v].z).front();
   const Nominal k = spaces[v].g_scale(best[v].z);
   c.time_scale = k.time_scale;
@@ -1279,7 +1301,11 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
   const auto& a = res.candidates.front();
   const auto seconds = second_effects(res, problem, data, scale, o);
   std::vector<FitSpace> spaces;
-  for (const auto& b : seconds) spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
+  for (const auto& b : seconds) {
+    spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
+    for (const Effect& e : {a.effect, b})
+      if (e.kind == EffectKind::saturation) spaces.back().hold(e.kind, 2, e.p[2]);  // the placement its own fit chose
+  }
   std::vector<std::pair<double, Eigen::VectorXd>> fits(seconds.size() * kPairStarts);
   run_each("pair fits", fits.size(), problem, o, [&](size_t t, Problem& own) {
     const size_t i = t / kPairStarts;
@@ -1640,7 +1666,7 @@ DataScale align_and_baseline(DiagnosisResult& res, Problem& problem, const std::
   res.alignment.offset_um = base.offset_um;
   res.fitted = res.baseline;
   res.y_fitted_um = res.y_baseline_um;
-  return data_scale(data, base.y);
+  return data_scale(data, base.y, res.held_out);
 }
 
 /// Sensor noise: the median over recordings of the noise estimated from each one's residual.

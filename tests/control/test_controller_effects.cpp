@@ -64,6 +64,23 @@ TEST(ControllerEffects, CompensationRemovesTheEffectsExcessErrorOnEveryReference
   EXPECT_GT(both_1Hz, 2.0 * track({}, {}, "1Hz").errors.mean_abs_true_um);
 }
 
+TEST(ControllerEffects, ASaturationOnTheDriveIsUndoneBeforeFInverse) {
+  // The drive softens from a static 100 um (the references reach 125 um): an amplifier or a force limit.
+  const std::vector<Effect> drive{{EffectKind::saturation, {100.0, 60.0, 1.0}}};
+  double largest_excess_um = 0.0;
+  for (const auto& ref : kPaperReferenceNames) {
+    const double floor_um = track({}, {}, ref).errors.mean_abs_true_um;
+    const auto with = track(drive, drive, ref).errors;
+    const auto without = track(drive, {}, ref).errors;
+    const double excess_with = with.mean_abs_true_um - floor_um, excess_without = without.mean_abs_true_um - floor_um;
+    std::printf("drive saturation %-6s mean|r - y_true| without the effect %.4f um, with %.4f um (loop floor %.4f um)\n",
+                ref.c_str(), without.mean_abs_true_um, with.mean_abs_true_um, floor_um);
+    EXPECT_LE(excess_with, 0.2 * std::max(excess_without, 0.0) + 5e-4) << ref;
+    largest_excess_um = std::max(largest_excess_um, excess_without);
+  }
+  EXPECT_GT(largest_excess_um, 0.01);  // there was something to undo
+}
+
 TEST(ControllerEffects, WrongEffectsDoNotDestabilise) {
   // The controller believes twice the truth's hysteresis and creep.
   const std::vector<Effect> wrong{{EffectKind::hysteresis, {0.6, 200.0}}, {EffectKind::creep, {0.4, 4.0}}};

@@ -124,6 +124,34 @@ TEST(AugmentedPlant, SaturationSoftensAboveTheKnee) {
   EXPECT_NEAR(run(e, steps(30000, 0.0, 150.0), 0.0).back(), run({}, steps(30000, 0.0, 150.0), 0.0).back(), 1e-9);
 }
 
+TEST(AugmentedPlant, SaturationOnTheDriveIsGFedTheSaturatedDrive) {
+  const Effect on_drive{EffectKind::saturation, {100.0, 200.0, 1.0}}, on_output{EffectKind::saturation, {100.0, 200.0}};
+  const auto model = paper_model(3);
+  const double dc = model.G.dc_gain();
+  // The voltage whose f gives the saturated drive of 600 V: the nominal plant stepped there is the same plant.
+  const double w = soft_saturation(dc * model.f(600.0), 100.0, 200.0) / dc;
+  double lo = 0.0, hi = 600.0;
+  for (int i = 0; i < 100; ++i) (model.f(0.5 * (lo + hi)) < w ? lo : hi) = 0.5 * (lo + hi);
+  const auto saturated = run(on_drive, steps(30000, 0.0, 600.0), 0.0);
+  const auto equivalent = run({}, steps(30000, 0.0, 0.5 * (lo + hi)), 0.0);
+  for (size_t k = 0; k < saturated.size(); k += 100) ASSERT_NEAR(saturated[k], equivalent[k], 1e-9) << k;
+  // At rest both placements give the same displacement; on the way there, the drive's lags behind G.
+  const auto output_side = run(on_output, steps(30000, 0.0, 600.0), 0.0);
+  EXPECT_NEAR(saturated.back(), output_side.back(), 1e-4);  // 30 s: 16 slow time constants
+  EXPECT_LT(saturated[1000], output_side[1000] - 1.0);
+}
+
+TEST(Effect, ASaturationIsOnTheDisplacementOrOnTheDriveNothingBetween) {
+  EXPECT_NO_THROW(validate({EffectKind::saturation, {10.0, 20.0, 1.0}}, Ts, "e"));
+  EXPECT_NO_THROW(validate({EffectKind::saturation, {10.0, 20.0}}, Ts, "e"));  // older files: the displacement
+  try {
+    validate({EffectKind::saturation, {10.0, 20.0, 0.5}}, Ts, "model.effect[0]");
+    FAIL() << "on_drive = 0.5 accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.key(), "model.effect[0].on_drive");
+  }
+}
+
 TEST(AugmentedPlant, WholeSampleDelayShiftsTheOutput) {
   const auto u = voltage(3000);
   const auto y0 = run({}, u, u[0]);
@@ -326,6 +354,17 @@ TEST(Effect, ADriftWithoutASettlingTimeIsTheRampOfOlderFiles) {
   // The fit reaches a ramp within its bounds: a settling time a thousand recordings long bends it by 0.05%.
   const std::array<double, kMaxEffectParams> long_settling{0.0, 1.0, 0.0, 1e3 * DataScale{}.duration_s};
   EXPECT_NEAR(drift_um(long_settling, DataScale{}.duration_s), DataScale{}.duration_s, 1e-3 * DataScale{}.duration_s);
+}
+
+TEST(Effect, ADriftOnsetStaysInTheFirstNineTenthsOfTheFitSegment) {
+  DataScale d;
+  d.duration_s = 14.0;
+  d.fit_end_s = 9.8;  // one recording, the last 30% held out
+  const auto specs = parameter_specs(EffectKind::drift, d);
+  EXPECT_DOUBLE_EQ(specs[2].upper, 0.9 * 9.8);
+  for (double start : specs[2].starts) EXPECT_LE(start, specs[2].upper);
+  // Nothing held out (a file's parameters, checked against the union of all scales): the whole recording.
+  EXPECT_DOUBLE_EQ(parameter_specs(EffectKind::drift, DataScale{}).at(2).upper, DataScale{}.duration_s);
 }
 
 TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {

@@ -127,6 +127,19 @@ TEST(EffectCompensator, OutputSideUndoesSaturationAndDrift) {
   EXPECT_NEAR(c.linear_output(40.0, 5.0) - c.linear_output(40.0), -0.2 * 5e-3, 1e-12);
 }
 
+TEST(EffectCompensator, ASaturationOnTheDriveIsInvertedOnTheDriveAndLeavesTheOutputAlone) {
+  // kUnitModel: G(0) = 1, so the drive's static displacement is w itself.
+  const std::vector<Effect> effects{{EffectKind::saturation, {60.0, 50.0, 1.0}}};
+  EffectCompensator c(kUnitModel, effects, 1e-3, 0.0, 1000.0, 0, 50.0);
+  for (double w = -105.0; w <= 105.0; w += 0.5) {
+    EXPECT_NEAR(c.drive(w), soft_saturation(w, 60.0, 50.0), 1e-12) << w;
+    EXPECT_NEAR(c.drive(c.drive_inverse(w)), w, 1e-9) << w;  // within 95% of the ceiling (110)
+    EXPECT_EQ(c.linear_output(w), w);
+  }
+  // Beyond the ceiling the request is read as 95% of the way there, as on the output side.
+  EXPECT_NEAR(c.drive(c.drive_inverse(500.0)), 60.0 + 0.95 * 50.0, 1e-9);
+}
+
 TEST(EffectCompensator, OutputSideUndoesASettlingDrift) {
   const std::vector<Effect> effects{{EffectKind::drift, {0.5, 0.2, 0.3, 0.8}}};
   EffectCompensator c(kUnitModel, effects, 1e-3, 0.0, 1000.0, 0, 50.0);

@@ -86,7 +86,8 @@ TEST(NoAllocation, SimulatedRigRunningADiagnosedEffectDoesNotAllocate) {
       {EffectKind::dead_zone, {20.0, 30.0}},   {EffectKind::saturation, {100.0, 500.0}},
       {EffectKind::delay, {2.5e-3}},           {EffectKind::asymmetric_dynamics, {0.3}},
       {EffectKind::slew_limit, {2000.0}},      {EffectKind::resonance, {20.0, 0.1, 0.95}},
-      {EffectKind::drift, {0.1, 0.01, 1.0}},   {EffectKind::bias_dependent_dynamics, {0.3, 0.5}}};
+      {EffectKind::drift, {0.1, 0.01, 1.0}},   {EffectKind::bias_dependent_dynamics, {0.3, 0.5}},
+      {EffectKind::saturation, {100.0, 500.0, 1.0}}};  // on the drive
   std::vector<std::vector<Effect>> runs;
   for (size_t i = 0; i < effects.size(); ++i) {
     runs.push_back({effects[i]});
@@ -116,7 +117,7 @@ TEST(NoAllocation, ControllerCompensatingEachEffectAndMixturesDoesNotAllocate) {
   const std::vector<Effect> effects{{EffectKind::hysteresis, {0.1, 30.0, -0.5}}, {EffectKind::creep, {0.05, 10.0, 1.0}},
                                     {EffectKind::dead_zone, {20.0, 30.0}}, {EffectKind::saturation, {100.0, 50.0}},
                                     {EffectKind::delay, {2.5e-3}},         {EffectKind::slew_limit, {20000.0}},
-                                    {EffectKind::drift, {0.1, 0.01, 1.0}}};
+                                    {EffectKind::drift, {0.1, 0.01, 1.0}}, {EffectKind::saturation, {100.0, 50.0, 1.0}}};
   std::vector<std::vector<Effect>> runs;
   for (size_t i = 0; i < effects.size(); ++i) {
     runs.push_back({effects[i]});

@@ -232,6 +232,23 @@ TEST(Diagnose, LocatesAMismatchOnlyWhereItIs) {
   EXPECT_EQ(r.verdict, "drift") << r.explanation;
 }
 
+TEST(Diagnose, ADriftOnsetIsFittedInsideTheFitSegmentNotExtrapolatedFromTheHeldOutData) {
+  // 14 s, one recording: the last 30% (from 9.8 s) is held out. A drift from 11 s is in the held-out data
+  // alone; a drift candidate may not start where nothing fitted it (its ramp would be a guess).
+  const auto r = diagnose(paper_model(3), {recording({EffectKind::drift, {0.0, 0.1, 11.0}}, 0.05, 3, 14.0)});
+  const double fit_end_s = 0.7 * 14.0;
+  bool seen = false;
+  for (const auto& c : r.candidates)
+    if (c.effect.kind == EffectKind::drift) {
+      seen = true;
+      ASSERT_EQ(c.specs[2].name, "onset_s");
+      EXPECT_NEAR(c.specs[2].upper, 0.9 * fit_end_s, 0.01);
+      EXPECT_LE(c.effect.p[2], 0.9 * fit_end_s + 1e-9);
+    }
+  EXPECT_TRUE(seen);
+  EXPECT_NE(r.verdict, "none") << r.explanation;
+}
+
 TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
   const auto model = paper_model(3);
   auto s = recording({}, 0.05, 1, 10.0);
