@@ -337,7 +337,8 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
                 "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
                 "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
-                "refit widened (not none, and the nuisance-only refit's gain stopped at its ordinary tolerance): %d cases, %d of them right\n",
+                "refit widened (not none at the ordinary tolerances; the gain stopped at its own, or f's shape did and "
+                "the widened refit was none): %d cases, %d of them right\n",
                 r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed, r.single_correct, r.single_cases, acc,
                 acc / 95.0, r.false_alarms, r.none_cases, fa, fa / 2.0, r.mixture_both_named, r.mixture_cases, both,
                 both / 80.0, r.mixture_dominant_correct, r.mixture_cases, mean, median, worst, worst / 0.5, worst_aligned, r.mean_case_s,

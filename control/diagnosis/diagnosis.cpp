@@ -1749,7 +1749,8 @@ std::pair<double, double> gain_bounds(const DiagnosisOptions& o) {
 }
 
 DiagnosisOptions widened_tolerances(DiagnosisOptions o) {
-  o.gain_tolerance = std::max(o.gain_tolerance, 1.0);
+  // 0.25..4: the gain follows f's first term, which a fit of too low an order may double (shape_off).
+  o.gain_tolerance = std::max(o.gain_tolerance, 3.0);
   o.poly_shape_tolerance = std::max(o.poly_shape_tolerance, 3.0);
   o.poly_next_tolerance = std::max(o.poly_next_tolerance, 3.0);
   o.f_increasing_margin = std::min(o.f_increasing_margin, 1.05);
@@ -1765,13 +1766,25 @@ namespace {
 
 /// When the nuisance-only refit's gain stops at its tolerance, the nominal's static curve is off by more
 /// than a recalibration: its parameters at their tolerance (the gain and f's terms), else none. f's shape
-/// alone at its bound is not enough: there a dead zone or a saturation may be what bends the curve, and on
-/// the tuning set, widening on it turned an asymmetric-dynamics case into a mode and two `none` cases into effects.
+/// alone at its bound widens only the `none` decision (shape_off): there a dead zone or a saturation may be
+/// what bends the curve, and on the tuning set, widening the whole diagnosis on it turned an
+/// asymmetric-dynamics case into a mode.
 std::vector<std::string> static_curve_off(const NominalRefit& r) {
   std::vector<std::string> off;
   if (std::find(r.at_bounds.begin(), r.at_bounds.end(), "gain") == r.at_bounds.end()) return off;
   for (const auto& b : r.at_bounds)
     if (b == "gain" || b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
+  return off;
+}
+
+/// f's shape or its next term at its tolerance (the gain inside it): the parameters, else none. A nominal f
+/// of too low an order (the least-squares n = 2 fit of an n = 3 curve) needs its first term halved and its
+/// shape doubled, and the gain then goes with f's first term: so the widened pass decides `none` alone, and
+/// when the data are not `none` there, the diagnosis goes on with the ordinary tolerances.
+std::vector<std::string> shape_off(const NominalRefit& r) {
+  std::vector<std::string> off;
+  for (const auto& b : r.at_bounds)
+    if (b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
   return off;
 }
 
@@ -1787,6 +1800,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   int first_pass_simulations = 0;
   DiagnosisOptions o = options;  // the tolerances in force
   std::vector<std::string> widened_from;
+  bool none_only = false, shape_tried = false;  // a widened pass that may only decide none (shape_off)
   for (;;) {
     DiagnosisResult res;
     for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
@@ -1795,8 +1809,21 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     Nominal k;
     auto refit = refit_and_test(res, problem, data, o, k);
     const bool none = decide_none(res, refit, o);
-    if (!none && o.widen_off_nominal && widened_from.empty()) {
+    if (!none && none_only) {  // the widened curve did not make the data none: back to the ordinary tolerances
+      o = options;
+      widened_from.clear();
+      none_only = false;
+      first_pass_simulations += problem.simulations();
+      continue;
+    }
+    if (!none && o.widen_off_nominal && widened_from.empty() && !shape_tried) {
       widened_from = static_curve_off(res.nominal_refit);
+      if (widened_from.empty()) {
+        // f's shape alone at its bound: a wider f may make the data none, but effects are not fitted wider
+        // (a dead zone or a saturation may be what bends the curve).
+        widened_from = shape_off(res.nominal_refit);
+        none_only = shape_tried = !widened_from.empty();
+      }
       if (!widened_from.empty()) {
         o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
         first_pass_simulations += problem.simulations();

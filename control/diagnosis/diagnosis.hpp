@@ -47,6 +47,8 @@ struct DiagnosisOptions {
   /// When the data are not `none` and the nuisance-only refit's gain stops at its tolerance, the nominal
   /// model's static curve is further off than a recalibration (a nominal identified with another polynomial
   /// order): the diagnosis then runs again with widened_tolerances, so that error is not blamed on an effect.
+  /// When only f's shape stops at its tolerance, the widened refit decides `none` alone: the data are `none`
+  /// if they are `none` there, else the diagnosis goes on with the ordinary tolerances.
   bool widen_off_nominal = true;
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
@@ -130,7 +132,8 @@ struct NominalRefit {
   /// the named effects when there are any, else the nuisance-only refit's.
   std::vector<std::string> at_bounds;
   /// The parameters of the nuisance-only refit that stopped at the ordinary tolerances when the diagnosis
-  /// widened them (DiagnosisOptions::widen_off_nominal); empty when it did not.
+  /// widened them (DiagnosisOptions::widen_off_nominal); empty when it did not (or when the shape alone
+  /// stopped and the widened refit did not make the data `none`).
   std::vector<std::string> widened_from;
   [[nodiscard]] bool widened() const noexcept { return !widened_from.empty(); }
 };
@@ -195,7 +198,7 @@ void check_series(const Series& s, const HammersteinModel& model);
 /// there because it absorbs what an effect would explain.
 std::vector<std::string> refit_at_bounds(const NominalRefit& refit, const DiagnosisOptions& options, bool with_loop);
 
-/// The tolerances of the refit when the nominal's static curve is far off: gain within [0.5, 2], f's shape
+/// The tolerances of the refit when the nominal's static curve is far off: gain within [0.25, 4], f's shape
 /// within [0.25, 4], f's next term's slope share within +-3, f kept increasing only to 1.05 times the largest
 /// recorded |u| (or the file's controller range): the n = 2 polynomial of one identification refits to the
 /// n = 3 polynomial of another, which turns over just above the recorded voltages.
