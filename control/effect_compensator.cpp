@@ -64,7 +64,7 @@ EffectCompensator::EffectCompensator(const HammersteinModel& model, std::span<co
     p_[static_cast<size_t>(e.kind)] = e.p;
     effects_[static_cast<size_t>(count_++)] = e;
   }
-  refuse_unsafe(model, voltage_max_V, operating_point_um);
+  refuse_unsafe(voltage_max_V, operating_point_um);
   if (has(EffectKind::hysteresis)) hysteresis_ = HysteresisOperator(p(EffectKind::hysteresis)[0], p(EffectKind::hysteresis)[1],
                                                                 p(EffectKind::hysteresis)[2]);
   if (has(EffectKind::slew_limit)) slew_step_V_ = p(EffectKind::slew_limit)[0] * Ts;
@@ -88,8 +88,7 @@ EffectCompensator::EffectCompensator(const HammersteinModel& model, std::span<co
   reset_steady_state(std::clamp(0.0, voltage_min_V, voltage_max_V));
 }
 
-void EffectCompensator::refuse_unsafe(const HammersteinModel& model, double voltage_max_V,
-                                      double operating_point_um) const {
+void EffectCompensator::refuse_unsafe(double voltage_max_V, double operating_point_um) const {
   for (auto kind : {EffectKind::asymmetric_dynamics, EffectKind::bias_dependent_dynamics})
     if (has(kind))
       throw ConfigError(key(kind), std::string(to_string(kind)) +

@@ -148,7 +148,7 @@ class EffectCompensator final {
   [[nodiscard]] double output_side_inverse(double y_um, double ahead) const noexcept;
   /// Predicted creep output `ahead` whole samples from now.
   [[nodiscard]] double creep_ahead(int ahead) const noexcept;
-  void refuse_unsafe(const HammersteinModel& model, double voltage_max_V, double operating_point_um) const;
+  void refuse_unsafe(double voltage_max_V, double operating_point_um) const;
 
   static constexpr size_t kKinds = kEffectKindNames.size();
   std::array<int, kKinds> index_ = [] {

@@ -40,9 +40,9 @@ std::vector<Effect> read_effect_tables(TableReader& parent, const std::string& k
   } else if (const auto* array = node->as_array()) {
     for (size_t i = 0; i < array->size(); ++i) {
       const std::string item = base + "[" + std::to_string(i) + "]";
-      const auto* table = (*array)[i].as_table();
-      if (!table) throw ConfigError(item, "must be a table ([[" + base + "]])");
-      TableReader t(table, item);
+      const auto* element = (*array)[i].as_table();
+      if (!element) throw ConfigError(item, "must be a table ([[" + base + "]])");
+      TableReader t(element, item);
       effects.push_back(read_one(t, item, sample_time_s));
     }
     if (effects.empty()) throw ConfigError(base, "is an empty list: omit it for no effect");

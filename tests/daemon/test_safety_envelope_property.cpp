@@ -170,8 +170,9 @@ void run_property(std::uint64_t seed, int clients, double simulated_s, Tally& ta
       ASSERT_LE(std::abs(rec.u_V - prev.u_V), u_step) << "slew; seed " << seed << " t " << rec.t_s << " state "
                                                       << to_string(rec.state) << " after " << to_string(prev.state);
     }
-    if (rec.state == LoopState::disabled || rec.state == LoopState::fault)
+    if (rec.state == LoopState::disabled || rec.state == LoopState::fault) {
       ASSERT_FALSE(rec.high_voltage) << "HV on in " << to_string(rec.state) << " at t " << rec.t_s;
+    }
     if (rec.state == LoopState::running && prev.state == LoopState::running && rec.target == prev.target) {
       if (rec.target == LoopTarget::displacement) {
         ++tally.running_displacement;
