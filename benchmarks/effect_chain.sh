@@ -131,13 +131,17 @@ wait; running=0
 
 echo "effect_chain: 3/3 tracking the paper's references in $MODES, ${TRACK_S} s each" >&2
 for mode in $MODES; do
+  # Written once per mode, before any run starts: rewriting them per reference truncated a file that a run
+  # started in the background for the previous reference might not have read yet ("is empty", 1 run in ~20).
+  with_mode "$OUT/floor.toml" "$mode" > "$OUT/floor-$mode.toml"
+  for rig in $RIGS; do
+    with_mode "$OUT/$rig/rig.toml" "$mode" > "$OUT/$rig/nominal-$mode.toml"
+    with_mode "$OUT/$rig/augmented-rig.toml" "$mode" > "$OUT/$rig/augmented-$mode.toml"
+  done
   for ref in $REFERENCES; do
-    with_mode "$OUT/floor.toml" "$mode" > "$OUT/floor-$mode.toml"
     throttle; run_daemon "$OUT/floor-$mode.toml" "paper-$ref" "$TRACK_S" "$OUT/floor-$mode-$ref.csv" &
     for rig in $RIGS; do
       d=$OUT/$rig
-      with_mode "$d/rig.toml" "$mode" > "$d/nominal-$mode.toml"
-      with_mode "$d/augmented-rig.toml" "$mode" > "$d/augmented-$mode.toml"
       for model in nominal augmented; do
         throttle; run_daemon "$d/$model-$mode.toml" "paper-$ref" "$TRACK_S" "$d/track-$model-$mode-$ref.csv" &
       done
@@ -189,7 +193,10 @@ done
 # Say why runs are missing or faulted (their logs have pvcgeld's reason): each reason once, with a count.
 for log in "$OUT"/*/track-*.log "$OUT"/floor-*.log "$OUT"/*/recording-*.log; do
   if grep -q "configuration error\|fault: [a-z]" "$log" && ! grep -q "fault: none" "$log"; then
-    grep -m1 -o "configuration error.*(in\|fault: [a-z_]*" "$log" | sed 's/ (in$//'
+    # A configuration error without a key's "(in" (an empty file) is said up to its first ';': a grep that
+    # matched nothing here ended the whole script (set -e, pipefail) with exit 1 and no reason given.
+    { grep -m1 -o "configuration error.*(in\|fault: [a-z_]*" "$log" || grep -m1 -o "configuration error[^;]*" "$log" || true; } |
+      sed 's/ (in$//'
   fi
 done | sort | uniq -c | while read -r count reason; do echo; echo "NOTE: $count runs: pvcgeld: $reason"; done
 # ------------------------------------------------------------------ plot: tracking error before and after
