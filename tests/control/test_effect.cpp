@@ -241,7 +241,7 @@ TEST(AugmentedPlant, AmplitudeDependentDynamicsSlowALargeSwingAndLeaveAHoldAlone
   const Effect e{EffectKind::bias_dependent_dynamics, {0.0, 1.0, y_ref, 2.0}};
   const auto sine = [](double amplitude_V) {
     std::vector<double> u(20000);
-    for (size_t k = 0; k < u.size(); ++k) u[k] = 300.0 + amplitude_V * std::sin(2.0 * std::numbers::pi * 1.0 * k * Ts);
+    for (size_t k = 0; k < u.size(); ++k) u[k] = 300.0 + amplitude_V * std::sin(2.0 * std::numbers::pi * static_cast<double>(k) * Ts);
     return u;
   };
   const auto lag_share = [&](double amplitude_V) {  // |y - y0| over the nominal's swing, last 5 s
