@@ -155,6 +155,12 @@ inline double soft_saturation(double y, double knee, double softness) noexcept {
   return excess > 0.0 ? std::copysign(knee + excess / std::sqrt(1.0 + (excess / softness) * (excess / softness)), y) : y;
 }
 
+/// The saturation effect on the drive (on_drive): G's input for f's output w, the soft knee acting on the
+/// static displacement G(0) w it would give (`q` the saturation's parameters).
+inline double saturated_drive(double w, double dc_gain, const std::array<double, kMaxEffectParams>& q) noexcept {
+  return soft_saturation(dc_gain * w, q[0], q[1]) / dc_gain;
+}
+
 /// The slew-limit effect over one sample: the amplifier ramps from its state
 /// toward the command (difference e) at most `cap` volts per sample; returns
 /// the mean over the sample relative to the state (what the gel sees).
@@ -266,9 +272,7 @@ class AugmentedPlant final {
   /// f, then a saturation on the drive (on_drive), if any: G's input.
   [[nodiscard]] double nonlinearity(double x_V) const noexcept {
     const double w = f_(std::clamp(x_V, -x_sat_, x_sat_));
-    if (!saturate_drive_) return w;
-    const auto& q = p(EffectKind::saturation);
-    return soft_saturation(dc_gain_ * w, q[0], q[1]) / dc_gain_;
+    return saturate_drive_ ? saturated_drive(w, dc_gain_, p(EffectKind::saturation)) : w;
   }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;

@@ -214,8 +214,7 @@ double EffectCompensator::saturation_inverse(double y) const noexcept {
 }
 
 double EffectCompensator::drive(double w) const noexcept {
-  if (drive_dc_gain_ == 0.0) return w;
-  return soft_saturation(drive_dc_gain_ * w, p(EffectKind::saturation)[0], p(EffectKind::saturation)[1]) / drive_dc_gain_;
+  return drive_dc_gain_ == 0.0 ? w : saturated_drive(w, drive_dc_gain_, p(EffectKind::saturation));
 }
 
 double EffectCompensator::drive_inverse(double w) const noexcept {

@@ -732,10 +732,9 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
                      const std::vector<std::vector<char>>& held_out) {
   DataScale d;
   for (size_t r = 0; r < data.size(); ++r) {
-    const auto& mask = held_out[r];
-    const auto last = std::find(mask.rbegin(), mask.rend(), 0);
-    const size_t end = last == mask.rend() ? 0 : static_cast<size_t>(mask.rend() - last) - 1;
-    d.fit_end_s = std::min(d.fit_end_s, data[r].t_s[end] - data[r].t_s.front());
+    const auto ranges = fit_ranges(held_out[r]);
+    const size_t last = ranges.empty() ? 0 : ranges.back().second - 1;  // the last fitted sample
+    d.fit_end_s = std::min(d.fit_end_s, data[r].t_s[last] - data[r].t_s.front());
   }
   // The slowest rate bounds the mode frequency; the fastest the delay line (in samples).
   d.sample_time_s = 0.0;
@@ -1049,9 +1048,7 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
   std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
   if (kind == EffectKind::hysteresis) {
     spaces.push_back(spaces.front());
-    auto& spread = spaces.back().specs[2];
-    spread.lower = spread.upper = 0.0;
-    spread.fixed = true;
+    spaces.back().hold(EffectKind::hysteresis, 2, 0.0);  // spread 0
   } else if (kind == EffectKind::saturation) {
     spaces.push_back(spaces.front());
     spaces.back().hold(EffectKind::saturation, 2, 1.0);  // on the drive
@@ -1764,19 +1761,6 @@ double excess_share_left(const DiagnosisResult& res, const ModelErrors& e) {
 
 namespace {
 
-/// When the nuisance-only refit's gain stops at its tolerance, the nominal's static curve is off by more
-/// than a recalibration: its parameters at their tolerance (the gain and f's terms), else none. f's shape
-/// alone at its bound widens only the `none` decision (shape_off): there a dead zone or a saturation may be
-/// what bends the curve, and on the tuning set, widening the whole diagnosis on it turned an
-/// asymmetric-dynamics case into a mode.
-std::vector<std::string> static_curve_off(const NominalRefit& r) {
-  std::vector<std::string> off;
-  if (std::find(r.at_bounds.begin(), r.at_bounds.end(), "gain") == r.at_bounds.end()) return off;
-  for (const auto& b : r.at_bounds)
-    if (b == "gain" || b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
-  return off;
-}
-
 /// f's shape or its next term at its tolerance (the gain inside it): the parameters, else none. A nominal f
 /// of too low an order (the least-squares n = 2 fit of an n = 3 curve) needs its first term halved and its
 /// shape doubled, and the gain then goes with f's first term: so the widened pass decides `none` alone, and
@@ -1785,6 +1769,18 @@ std::vector<std::string> shape_off(const NominalRefit& r) {
   std::vector<std::string> off;
   for (const auto& b : r.at_bounds)
     if (b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
+  return off;
+}
+
+/// When the nuisance-only refit's gain stops at its tolerance, the nominal's static curve is off by more
+/// than a recalibration: its parameters at their tolerance (the gain and f's terms), else none. f's shape
+/// alone at its bound widens only the `none` decision (shape_off): there a dead zone or a saturation may be
+/// what bends the curve, and on the tuning set, widening the whole diagnosis on it turned an
+/// asymmetric-dynamics case into a mode.
+std::vector<std::string> static_curve_off(const NominalRefit& r) {
+  if (std::find(r.at_bounds.begin(), r.at_bounds.end(), "gain") == r.at_bounds.end()) return {};
+  auto off = shape_off(r);
+  off.insert(off.begin(), "gain");  // refit_at_bounds names the gain first
   return off;
 }
 
