@@ -83,7 +83,9 @@ Controller::Controller(const HammersteinModel& model, const ControllerConfig& cf
       }()),
       dob_(model_, plant_, cfg.dob_lambda_s, cfg.dob_q_order),
       ff_(plant_),
-      correction_(dob_, plant_, model.f(cfg.voltage_min_V), model.f(cfg.voltage_max_V), cfg.learning_memory_s),
+      // p acts on G's input, so its range is the drive the voltage limits reach.
+      correction_(dob_, plant_, comp_.drive(model.f(cfg.voltage_min_V)), comp_.drive(model.f(cfg.voltage_max_V)),
+                  cfg.learning_memory_s),
       mode_(cfg.mode),
       pending_mode_(cfg.mode) {
   check_range("controller.slew_limit_V_per_s", cfg.slew_limit_V_per_s, 0.0, 1e9);
@@ -92,8 +94,10 @@ Controller::Controller(const HammersteinModel& model, const ControllerConfig& cf
   output_ = OutputStage(cfg.voltage_min_V, cfg.voltage_max_V, cfg.slew_limit_V_per_s, cfg.sample_time_s);
 
   const double dc = model_.G.dc_gain();
-  const double u_op = std::clamp(inverse_(cfg.operating_point_um / dc), cfg.voltage_min_V, cfg.voltage_max_V);
-  pid_plant_gain_ = model_.f.derivative(u_op);
+  // Mode pid has no inverse: a saturation on the drive lowers its plant's gain with f's slope.
+  const double u_op =
+      std::clamp(inverse_(comp_.drive_inverse(cfg.operating_point_um / dc)), cfg.voltage_min_V, cfg.voltage_max_V);
+  pid_plant_gain_ = model_.f.derivative(u_op) * comp_.drive_slope(model_.f(u_op));
   if (!(pid_plant_gain_ > 0.0)) throw ConfigError("controller.operating_point_um", "f' is not positive there");
   tune_modes();
   pid_ = Pid(gains_[static_cast<size_t>(mode_)], cfg.sample_time_s, cfg.antiwindup_tracking_time_s);

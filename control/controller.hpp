@@ -100,7 +100,8 @@ struct ControlOutput {
 /// fraction and whole samples of extra delay.
 ///  - pid:                u = C e. No model inverse, so the input-side effects are
 ///                        not compensated (by design: it is the paper's baseline); its
-///                        tuning plant f'(u_op) G_d includes a resonance and the delay.
+///                        tuning plant (drive o f)'(u_op) G_d includes a resonance, the delay and
+///                        a saturation on the drive's slope there.
 ///  - inverse_pid:        v = C e,                    u = H^-1(f^-1(v)).
 ///  - inverse_pid_dob:    v = C e - d_hat,            u = H^-1(f^-1(v)),
 ///                        d_hat = Q[G_d^-1 y_lin] - Q[z^-r_d v_applied].
@@ -188,7 +189,7 @@ class Controller final {
   Pid pid_;
   std::array<PidGains, 4> gains_{};
   std::array<LoopMargins, 4> margins_{};
-  double pid_plant_gain_ = 1.0;  // f'(x) at the operating point
+  double pid_plant_gain_ = 1.0;  // d drive(f(x)) / dx at the operating point
   ControllerMode mode_;
   ControllerMode pending_mode_;
 };

@@ -160,6 +160,11 @@ inline double soft_saturation(double y, double knee, double softness) noexcept {
 inline double saturated_drive(double w, double dc_gain, const std::array<double, kMaxEffectParams>& q) noexcept {
   return soft_saturation(dc_gain * w, q[0], q[1]) / dc_gain;
 }
+/// d soft_saturation / dy: 1 below the knee, (1 + (excess / softness)^2)^(-3/2) beyond it.
+inline double soft_saturation_slope(double y, double knee, double softness) noexcept {
+  const double excess = std::abs(y) - knee, r2 = (excess / softness) * (excess / softness);
+  return excess > 0.0 ? 1.0 / ((1.0 + r2) * std::sqrt(1.0 + r2)) : 1.0;
+}
 
 /// The slew-limit effect over one sample: the amplifier ramps from its state
 /// toward the command (difference e) at most `cap` volts per sample; returns

@@ -217,6 +217,12 @@ double EffectCompensator::drive(double w) const noexcept {
   return drive_dc_gain_ == 0.0 ? w : saturated_drive(w, drive_dc_gain_, p(EffectKind::saturation));
 }
 
+double EffectCompensator::drive_slope(double w) const noexcept {
+  if (drive_dc_gain_ == 0.0) return 1.0;
+  const auto& q = p(EffectKind::saturation);
+  return soft_saturation_slope(drive_dc_gain_ * w, q[0], q[1]);
+}
+
 double EffectCompensator::drive_inverse(double w) const noexcept {
   return drive_dc_gain_ == 0.0 ? w : saturation_inverse(drive_dc_gain_ * w) / drive_dc_gain_;
 }

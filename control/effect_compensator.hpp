@@ -112,6 +112,8 @@ class EffectCompensator final {
   [[nodiscard]] double voltage_for(double x_V) const noexcept;
   /// The linear block's input for f's output w: a saturation on the drive, else w.
   [[nodiscard]] double drive(double w) const noexcept;
+  /// d drive / dw (1 without a saturation on the drive).
+  [[nodiscard]] double drive_slope(double w) const noexcept;
   /// f's output that gives the linear block's input w (drive's inverse; a request beyond the
   /// saturation's ceiling is read as 95% of the way there, as on the output side).
   [[nodiscard]] double drive_inverse(double w) const noexcept;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -79,6 +80,32 @@ TEST(ControllerEffects, ASaturationOnTheDriveIsUndoneBeforeFInverse) {
     largest_excess_um = std::max(largest_excess_um, excess_without);
   }
   EXPECT_GT(largest_excess_um, 0.01);  // there was something to undo
+}
+
+TEST(ControllerEffects, ModePidIsTunedOnTheSlopeOfASaturatedDrive) {
+  // Mode pid has no inverse: at its operating point (100 um, beyond a 70 um knee) the rig's static
+  // gain du -> dy is G(0) d/du S(f(u)), lower than G(0) f'(u) by the saturation's slope there.
+  const auto model = paper_model(2);
+  const double dc = model.G.dc_gain();
+  const std::array<double, kMaxEffectParams> q{70.0, 60.0, 1.0};
+  const auto static_um = [&](double u_V) { return dc * saturated_drive(model.f(u_V), dc, q); };
+  double lo = 0.0, hi = 1000.0;  // the voltage at which the saturated rig rests at 100 um
+  for (int i = 0; i < 100; ++i) ((static_um(0.5 * (lo + hi)) < 100.0) ? lo : hi) = 0.5 * (lo + hi);
+  const double u_op = 0.5 * (lo + hi), h = 1e-3;
+  const double expected_gain = (static_um(u_op + h) - static_um(u_op - h)) / (2.0 * h) / dc;
+
+  ControllerConfig cfg;
+  cfg.effects = {{EffectKind::saturation, {q[0], q[1], q[2]}}};
+  const Controller with(model, cfg);
+  const Controller without(model, ControllerConfig{});
+  const auto gain = [](const Controller& c) {
+    return c.design_plant(ControllerMode::pid).b.sum() / c.design_plant(ControllerMode::inverse_pid).b.sum();
+  };
+  std::printf("mode pid plant gain d drive(f(u))/du %.6f /V at the operating point (expected %.6f; without the effect %.6f)\n",
+              gain(with), expected_gain, gain(without));
+  EXPECT_NEAR(gain(with), expected_gain, 1e-6 * expected_gain);
+  EXPECT_LT(gain(with), 0.8 * gain(without));  // the slope there is about 0.65
+  EXPECT_TRUE(with.margins(ControllerMode::pid).stable());
 }
 
 TEST(ControllerEffects, WrongEffectsDoNotDestabilise) {
