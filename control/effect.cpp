@@ -1,5 +1,6 @@
 #include "control/effect.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <algorithm>
 #include <bit>
@@ -25,10 +26,51 @@ std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b
 
 std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
 
+bool slowest_pole_is_real(const TransferFunction& G) {
+  const auto poles = G.poles();
+  if (poles.size() < 2) return false;
+  Eigen::Index j = 0;
+  poles.real().maxCoeff(&j);
+  for (Eigen::Index i = 0; i < poles.size(); ++i)
+    if (i != j && std::abs(poles(i) - poles(j)) <= 1e-6 * std::abs(poles(j))) return false;  // a repeated pole
+  return std::abs(poles(j).imag()) <= 1e-9 * std::abs(poles(j));
+}
+
 namespace {
 
 /// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40.
 constexpr double kGridStepsPerLog = 20.0 / (2.0 * std::numbers::ln2);  // 20 / ln 4
+
+/// G's slowest mode within the realised linear block (which may hold creep and a mode besides G):
+/// its projector's parts lambda v w^T and v w^T B, w^T v = 1, so that A + (k - 1) dA, B + (k - 1) dB
+/// runs that mode alone k times faster and keeps its DC gain.
+struct SlowMode {
+  Eigen::MatrixXd dA;
+  Eigen::VectorXd dB;
+};
+SlowMode slow_mode(const StateSpace& ss, const TransferFunction& G, const std::string& key) {
+  if (!slowest_pole_is_real(G))
+    throw ConfigError(key, "G's slowest pole is not real and simple (or G is of first order): there is no slow pole to "
+                           "move alone");
+  const auto poles = G.poles();
+  double slowest = -INFINITY;
+  for (const auto& p : poles) slowest = std::max(slowest, p.real());
+  // Right and left eigenvectors of that pole (validate_mixture keeps creep and a mode out of the block).
+  const auto eigenvector = [&](const Eigen::MatrixXd& M, double& lambda) {
+    const Eigen::EigenSolver<Eigen::MatrixXd> es(M);
+    Eigen::Index j = 0;
+    (es.eigenvalues().array() - slowest).abs().minCoeff(&j);
+    lambda = es.eigenvalues()(j).real();
+    for (Eigen::Index i = 0; i < es.eigenvalues().size(); ++i)
+      if (i != j && std::abs(es.eigenvalues()(i) - lambda) <= 1e-6 * std::abs(lambda))
+        throw ConfigError(key, "G's slowest pole coincides with another pole of the linear block: not separable");
+    return Eigen::VectorXd(es.eigenvectors().col(j).real());
+  };
+  double lambda = 0.0;
+  const Eigen::VectorXd v = eigenvector(ss.A, lambda), w = eigenvector(ss.A.transpose(), lambda);
+  const Eigen::MatrixXd P = v * w.transpose() / w.dot(v);
+  return {lambda * P, P * ss.B};
+}
 
 /// The linear block with the effects' LTI parts folded in (creep branches in
 /// parallel, structural mode in series), so one exact ZOH covers it.
@@ -147,7 +189,9 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       return {{"beta", -0.7, 3.0, false, {-0.2, 0.2, 0.6}},
               {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}},
               {"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true},
-              {"amplitude_beta", -0.7, 3.0, false, {0.0, -0.3, 0.6}, 0.0}};
+              {"amplitude_beta", -0.7, 3.0, false, {0.0, -0.3, 0.6}, 0.0},
+              // 0 or 1, a choice like the saturation's placement: diagnose fits each in a space of its own.
+              {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true}};
   }
   return {};
 }
@@ -193,10 +237,14 @@ void validate(const Effect& e, double Ts, const std::string& key) {
   }
   if (e.kind == EffectKind::saturation && e.p[2] != 0.0 && e.p[2] != 1.0)
     throw ConfigError(key + ".on_drive", format("must be 0 (on the displacement) or 1 (on the drive), got %g", e.p[2]));
+  if (e.kind == EffectKind::bias_dependent_dynamics && e.p[4] != 0.0 && e.p[4] != 1.0)
+    throw ConfigError(key + ".slow_pole_only",
+                      format("must be 0 (all of G's time constants) or 1 (G's slowest pole alone), got %g", e.p[4]));
 }
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {
   int count = 0, time_scaling = 0;
+  bool slow_pole_only = false;
   std::array<bool, kEffectKindNames.size()> seen{};
   for (const auto& e : effects) {
     if (e.kind == EffectKind::none) continue;
@@ -205,7 +253,11 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
       throw ConfigError(key, "effect '" + std::string(to_string(e.kind)) + "' given twice");
     seen[static_cast<size_t>(e.kind)] = true;
     time_scaling += e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics;
+    slow_pole_only |= e.kind == EffectKind::bias_dependent_dynamics && e.p[4] != 0.0;
   }
+  // Their poles join G's in one linear block, where G's slow mode is no longer its own.
+  if (slow_pole_only && (seen[static_cast<size_t>(EffectKind::creep)] || seen[static_cast<size_t>(EffectKind::resonance)]))
+    throw ConfigError(key, "bias_dependent_dynamics with slow_pole_only = 1 runs without creep and resonance");
   if (count > kMaxEffects)
     throw ConfigError(key, "at most " + std::to_string(kMaxEffects) + " effects run together, got " + std::to_string(count));
   if (time_scaling > 1)
@@ -245,10 +297,17 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     scale_grid_ = {1.0};
   }
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
+  const bool slow_only = time_scaling_ == EffectKind::bias_dependent_dynamics && p(EffectKind::bias_dependent_dynamics)[4] != 0.0;
+  const auto slow = slow_only ? slow_mode(ss, model.G, "effect.bias_dependent_dynamics.slow_pole_only") : SlowMode{};
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
-    scaled.A /= scale_grid_[g];
-    scaled.B /= scale_grid_[g];
+    if (slow_only) {
+      scaled.A += (1.0 / scale_grid_[g] - 1.0) * slow.dA;
+      scaled.B += (1.0 / scale_grid_[g] - 1.0) * slow.dB;
+    } else {
+      scaled.A /= scale_grid_[g];
+      scaled.B /= scale_grid_[g];
+    }
     const auto d = discretize_zoh(scaled, Ts);
     if (g == unit) {
       rest_lu_.compute(Matrix::Identity(d.A.rows(), d.A.cols()) - Matrix(d.A));

@@ -104,7 +104,7 @@ struct DataScale {
 };
 
 /// Maximum number of parameters of one effect.
-inline constexpr int kMaxEffectParams = 4;
+inline constexpr int kMaxEffectParams = 5;
 
 /// Maximum number of effects one plant runs at once (a mixture of two).
 inline constexpr int kMaxEffects = 2;
@@ -189,6 +189,10 @@ inline double drift_um(const std::array<double, kMaxEffectParams>& q, double t_s
 /// log-uniformly over `spread_decades` around tau (log-type creep).
 std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
 
+/// G has a real pole slower than all its others (and at least two): bias_dependent_dynamics may move it alone
+/// (slow_pole_only).
+bool slowest_pole_is_real(const TransferFunction& G);
+
 /// G with the linear effects of `effects` folded in (creep branches in parallel,
 /// a structural mode in series), the linear block AugmentedPlant runs; G itself
 /// when neither is present.
@@ -238,7 +242,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///  - bias_dependent_dynamics: G runs (1 + (beta y_op + amplitude_beta y_swing) / y_ref) times slower, y_op the
 ///    displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over the
 ///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the
-///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V)).
+///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V));
+///    slow_pole_only 1: only G's slowest real pole moves, its mode's DC gain kept (the fast dynamics do not
+///    depend on the bias), 0 (the default): all of G's time constants.
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:

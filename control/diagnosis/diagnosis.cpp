@@ -221,6 +221,8 @@ class Problem {
       for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
     u_keep_ = std::max(o.f_increasing_margin * u_ref_, o.f_increasing_up_to_V);
   }
+  /// The nominal model, as given (before any refit).
+  [[nodiscard]] const HammersteinModel& model() const noexcept { return model_; }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
   void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
@@ -1040,18 +1042,29 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
   return memory != before;
 }
 
+/// The parameter that chooses between forms fitted in spaces of their own (candidate_spaces), if any.
+std::optional<size_t> form_choice(EffectKind kind) {
+  if (kind == EffectKind::saturation) return 2;               // on_drive
+  if (kind == EffectKind::bias_dependent_dynamics) return 4;  // slow_pole_only
+  return std::nullopt;
+}
+
 /// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
 /// (threshold_spread 0), kept only when the free shape does not fit clearly better: on short or
-/// closed-loop data the free shape otherwise bends to the fit segment alone.
+/// closed-loop data the free shape otherwise bends to the fit segment alone. A choice of form (a
+/// saturation's placement, bias-dependent dynamics on G's slow pole alone) is a space of its own.
 std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, const DiagnosisOptions& o,
-                                       const std::vector<Series>& data) {
+                                       const std::vector<Series>& data, const TransferFunction& G) {
   std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
   if (kind == EffectKind::hysteresis) {
     spaces.push_back(spaces.front());
     spaces.back().hold(EffectKind::hysteresis, 2, 0.0);  // spread 0
   } else if (kind == EffectKind::saturation) {
     spaces.push_back(spaces.front());
-    spaces.back().hold(EffectKind::saturation, 2, 1.0);  // on the drive
+    spaces.back().hold(EffectKind::saturation, *form_choice(kind), 1.0);  // on the drive
+  } else if (kind == EffectKind::bias_dependent_dynamics && slowest_pole_is_real(G)) {
+    spaces.push_back(spaces.front());
+    spaces.back().hold(EffectKind::bias_dependent_dynamics, *form_choice(kind), 1.0);  // the slow pole alone
   }
   return spaces;
 }
@@ -1084,7 +1097,7 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
                       const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
                       const DiagnosisOptions& o) {
   // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
-  // (on the drive) is another placement, taken when it fits better.
+  // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better.
   const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
   const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - gain_needed) * best[1].cost ? 1 : 0;
   c.effect = spaces[v].effects(best[v].z).front();
@@ -1116,7 +1129,7 @@ void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, 
   std::vector<std::vector<FitSpace>> spaces;
   std::vector<Task> tasks;
   for (size_t w = 0; w < which.size(); ++w) {
-    spaces.push_back(candidate_spaces(candidates[which[w]].effect.kind, scale, o, data));
+    spaces.push_back(candidate_spaces(candidates[which[w]].effect.kind, scale, o, data, problem.model().G));
     for (size_t v = 0; v < spaces.back().size(); ++v)
       for (size_t i = 0; i < starts[which[w]].size(); ++i) tasks.push_back({w, v, i});
   }
@@ -1300,8 +1313,8 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
   std::vector<FitSpace> spaces;
   for (const auto& b : seconds) {
     spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
-    for (const Effect& e : {a.effect, b})
-      if (e.kind == EffectKind::saturation) spaces.back().hold(e.kind, 2, e.p[2]);  // the placement its own fit chose
+    for (const Effect& e : {a.effect, b})  // the form its own fit chose
+      if (const auto i = form_choice(e.kind)) spaces.back().hold(e.kind, *i, e.p[*i]);
   }
   std::vector<std::pair<double, Eigen::VectorXd>> fits(seconds.size() * kPairStarts);
   run_each("pair fits", fits.size(), problem, o, [&](size_t t, Problem& own) {

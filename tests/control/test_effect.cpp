@@ -257,6 +257,61 @@ TEST(AugmentedPlant, AmplitudeDependentDynamicsSlowALargeSwingAndLeaveAHoldAlone
   EXPECT_NEAR(y.back(), y0.back(), 1e-9);  // at rest nothing swings: the nominal plant exactly
 }
 
+TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneMoveItAndKeepItsGain) {
+  // slow_pole_only: in G's modal form r1/(s + p1) + r2/(s + p2), p1 the slow pole, the slow mode alone runs
+  // N = 1 + beta y / y_ref times slower (its DC gain r1 / p1 kept). Reference: that form stepped exactly
+  // over each sample with N held (ZOH), the plant's 1-sample I/O delay, y_op = y (time constant 0).
+  const auto model = paper_model(3);
+  const double beta = 1.5, y_ref = model.G.dc_gain() * model.f(500.0);
+  const Effect e{EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref, 0.0, 1.0}};
+  const auto poles = model.G.poles();
+  const double p1 = -std::max(poles(0).real(), poles(1).real()), p2 = -std::min(poles(0).real(), poles(1).real());
+  const auto residue = [&](double p, double other) { return (1.15 * -p + 1.03) / (-p + other); };
+  const double r1 = residue(p1, p2), r2 = residue(p2, p1);
+  std::vector<double> u(8000, 0.0);
+  for (size_t k = 0; k < u.size(); ++k) u[k] = k < 1000 ? 0.0 : k < 4000 ? 600.0 : 200.0;
+  const auto y = run(e, u, 0.0), y_all = run({EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref}}, u, 0.0);
+  double x1 = 0.0, x2 = 0.0, largest_error = 0.0, largest_gap_to_all = 0.0;
+  for (size_t k = 1; k < u.size(); ++k) {
+    const double y_before = r1 * x1 + r2 * x2, w = model.f(k >= 2 ? u[k - 2] : 0.0);
+    const double N = std::clamp(1.0 + beta * y_before / y_ref, 0.25, 4.0);
+    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
+    x1 = a1 * x1 + (1.0 - a1) * w / p1;
+    x2 = a2 * x2 + (1.0 - a2) * w / p2;
+    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2)));
+    largest_gap_to_all = std::max(largest_gap_to_all, std::abs(y[k] - y_all[k]));
+  }
+  const double span_um = model.G.dc_gain() * model.f(600.0);
+  std::printf("slow pole alone: largest error %.4f um against the modal reference, %.3f um from all poles scaled "
+              "(span %.1f um)\n", largest_error, largest_gap_to_all, span_um);
+  EXPECT_LT(largest_error, 5e-4 * span_um);  // the 41-point grid's interpolation
+  EXPECT_GT(largest_gap_to_all, 0.02 * span_um);  // and it is not the all-poles form
+}
+
+TEST(Effect, OnlyASlowRealPoleMovesAlone) {
+  try {
+    validate({EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 0.5}}, Ts, "model.effect[0]");
+    FAIL() << "slow_pole_only = 0.5 accepted";
+  } catch (const ConfigError& err) {
+    EXPECT_EQ(err.key(), "model.effect[0].slow_pole_only");
+  }
+  const HammersteinModel first_order{paper_model(3).f, TransferFunction({5.0}, {0.1, 1.0})};
+  try {
+    AugmentedPlant p(first_order, 1, Ts, {EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 1.0}});
+    FAIL() << "a first-order G accepted";
+  } catch (const ConfigError& err) {
+    EXPECT_EQ(err.key(), "effect.bias_dependent_dynamics.slow_pole_only");
+    EXPECT_NE(std::string(err.what()).find("first order"), std::string::npos) << err.what();
+  }
+  // Creep's and a mode's poles join G's in one linear block: G's slow mode is then not its own.
+  const std::vector<Effect> with_creep{{EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 1.0}},
+                                       {EffectKind::creep, {0.1, 3.0}}};
+  EXPECT_THROW(validate_mixture(with_creep, "model.effect"), ConfigError);
+  const std::vector<Effect> with_loop{{EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 1.0}},
+                                      {EffectKind::hysteresis, {0.1, 20.0}}};
+  EXPECT_NO_THROW(validate_mixture(with_loop, "model.effect"));
+}
+
 TEST(AugmentedPlant, RestVoltageInvertsTheSteadyState) {
   AugmentedPlant p(paper_model(3), 1, Ts, {EffectKind::creep, {0.01, 3.0}});
   p.reset_steady_state(321.0);

@@ -421,6 +421,24 @@ TEST(NoneTest, FalseAlarmRateOnNominalDataIsWithinItsStatedLevel) {
 namespace pvcgel::control::diagnosis {
 namespace {
 
+/// The largest |y| the nominal `m` gives on the recordings' inputs (bias_dependent_dynamics' reference).
+double largest_nominal_displacement(const HammersteinModel& m, const std::vector<Series>& recs) {
+  double y_max = 0.0;
+  for (const auto& s : recs)
+    for (double y : AugmentedPlant(m, 1, Ts, Effect{}).simulate(s.u_V, s.u_V[0])) y_max = std::max(y_max, std::abs(y));
+  return y_max;
+}
+
+/// Replaces each recording's output by `truth` on `m` plus 0.05 um of sensor noise.
+void record_truth(std::vector<Series>& recs, const HammersteinModel& m, const Effect& truth, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> N(0.0, 0.05);
+  for (auto& s : recs) {
+    s.y_um = AugmentedPlant(m, 1, Ts, truth).simulate(s.u_V, s.u_V[0]);
+    for (double& y : s.y_um) y += N(rng);
+  }
+}
+
 TEST(Diagnose, DynamicsThatDependOnTheSwingAreBiasDependentDynamicsWithAnAmplitudeTerm) {
   // Two recordings about the same bias, one swinging 2.5 times wider: only the amplitude term tells them
   // apart (a level term sees the same operating point in both).
@@ -430,16 +448,8 @@ TEST(Diagnose, DynamicsThatDependOnTheSwingAreBiasDependentDynamicsWithAnAmplitu
     for (double& u : s.u_V) u = 350.0 + scale * (u - 350.0);
     recs.push_back(s);
   }
-  double y_max = 0.0;
-  for (const auto& s : recs)
-    for (double y : AugmentedPlant(paper_model(3), 1, Ts, Effect{}).simulate(s.u_V, s.u_V[0])) y_max = std::max(y_max, std::abs(y));
-  const Effect truth{EffectKind::bias_dependent_dynamics, {0.0, 2.0, y_max, 1.5}};
-  std::mt19937_64 rng(5);
-  std::normal_distribution<double> N(0.0, 0.05);
-  for (auto& s : recs) {
-    s.y_um = AugmentedPlant(paper_model(3), 1, Ts, truth).simulate(s.u_V, s.u_V[0]);
-    for (double& y : s.y_um) y += N(rng);
-  }
+  const double y_max = largest_nominal_displacement(paper_model(3), recs);
+  record_truth(recs, paper_model(3), {EffectKind::bias_dependent_dynamics, {0.0, 2.0, y_max, 1.5}}, 5);
   const auto r = diagnose(paper_model(3), recs);
   ASSERT_EQ(r.verdict, "bias_dependent_dynamics") << r.explanation;
   EXPECT_GT(r.effect.p[3], 0.5);  // the swing, not the level, slows G
@@ -459,22 +469,29 @@ TEST(Diagnose, BiasDependentDynamicsIsFoundOnAnAmplifierInputActuator) {
     for (double& u : s.u_V) u = bias_V + (u - 350.0) / 100.0;  // the multisine scaled to +-2.1 V around the bias
     recs.push_back(s);
   }
-  double y_max = 0.0;
-  for (const auto& s : recs) {
-    AugmentedPlant nominal(m, 1, Ts, Effect{});
-    for (double y : nominal.simulate(s.u_V, s.u_V[0])) y_max = std::max(y_max, std::abs(y));
-  }
-  const Effect truth{EffectKind::bias_dependent_dynamics, {0.6, 0.5, y_max}};
-  std::mt19937_64 rng(21);
-  std::normal_distribution<double> N(0.0, 0.05);
-  for (auto& s : recs) {
-    AugmentedPlant p(m, 1, Ts, truth);
-    s.y_um = p.simulate(s.u_V, s.u_V[0]);
-    for (double& y : s.y_um) y += N(rng);
-  }
+  const double y_max = largest_nominal_displacement(m, recs);
+  record_truth(recs, m, {EffectKind::bias_dependent_dynamics, {0.6, 0.5, y_max}}, 21);
   const auto r = diagnose(m, recs);
   ASSERT_EQ(r.verdict, "bias_dependent_dynamics") << r.explanation;
   EXPECT_NEAR(r.effect.p[2], y_max, 0.05 * y_max);  // the reference is the recorded scale, not fitted
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.5 * r.nominal_refit.errors.rmse_validation_um);
+}
+
+TEST(Diagnose, DynamicsWhoseSlowPoleAloneMovesWithTheBiasAreFittedInThatForm) {
+  // Two recordings at 200 V and 500 V bias: G's slow pole (0.53 rad/s) slows with the displacement, its
+  // fast one (16.6 rad/s) does not. The all-poles form would slow the fast response too.
+  std::vector<Series> recs;
+  for (double bias_V : {200.0, 500.0}) {
+    Series s = recording({}, 0.0, 3, 15.0);
+    for (double& u : s.u_V) u = bias_V + 0.6 * (u - 350.0);
+    recs.push_back(s);
+  }
+  const double y_max = largest_nominal_displacement(paper_model(3), recs);
+  record_truth(recs, paper_model(3), {EffectKind::bias_dependent_dynamics, {1.0, 0.5, y_max, 0.0, 1.0}}, 8);
+  const auto r = diagnose(paper_model(3), recs);
+  ASSERT_EQ(r.verdict, "bias_dependent_dynamics") << r.explanation;
+  EXPECT_EQ(r.effect.p[4], 1.0);  // the slow pole alone
+  EXPECT_NEAR(r.effect.p[0], 1.0, 0.3);
   EXPECT_LT(r.fitted.rmse_validation_um, 0.5 * r.nominal_refit.errors.rmse_validation_um);
 }
 
