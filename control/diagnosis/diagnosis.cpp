@@ -1803,13 +1803,34 @@ std::string_view loop_start_name(double branch) noexcept {
   return branch > 0.0 ? "rising" : branch < 0.0 ? "falling" : "virgin";
 }
 
+/// The `none` test once more with f's shape and next term free to `widened_tolerances` (shape_off names
+/// which stopped at their bound): the diagnosis when the data are none there, else nothing. Adds its
+/// simulations to `simulations` either way.
+std::optional<DiagnosisResult> none_with_a_wider_curve(const HammersteinModel& model, const std::vector<Series>& data,
+                                                       const DiagnosisOptions& options, std::vector<std::string> off,
+                                                       int& simulations) {
+  const DiagnosisOptions o = widened_tolerances(options);
+  DiagnosisResult res;
+  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+  Problem problem(model, data, res.held_out, o);
+  std::optional<SecondPass> no_second;
+  (void)align_and_baseline(res, problem, data, o, no_second);
+  Nominal k;
+  auto refit = refit_and_test(res, problem, data, o, k);
+  const bool none = decide_none(res, refit, o);
+  simulations += problem.simulations();
+  if (!none) return std::nullopt;
+  res.nominal_refit.widened_from = std::move(off);
+  return res;
+}
+
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
   check_inputs(model, data);
   std::optional<SecondPass> second;
-  int first_pass_simulations = 0;
+  int earlier_simulations = 0;  // of the passes before the one that decides
   DiagnosisOptions o = options;  // the tolerances in force
   std::vector<std::string> widened_from;
-  bool none_only = false, shape_tried = false;  // a widened pass that may only decide none (shape_off)
+  bool shape_tried = false;  // the `none` test with a wider curve (none_with_a_wider_curve) ran and failed
   for (;;) {
     DiagnosisResult res;
     for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
@@ -1818,25 +1839,24 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     Nominal k;
     auto refit = refit_and_test(res, problem, data, o, k);
     const bool none = decide_none(res, refit, o);
-    if (!none && none_only) {  // the widened curve did not make the data none: back to the ordinary tolerances
-      o = options;
-      widened_from.clear();
-      none_only = false;
-      first_pass_simulations += problem.simulations();
-      continue;
-    }
     if (!none && o.widen_off_nominal && widened_from.empty() && !shape_tried) {
       widened_from = static_curve_off(res.nominal_refit);
-      if (widened_from.empty()) {
-        // f's shape alone at its bound: a wider f may make the data none, but effects are not fitted wider
-        // (a dead zone or a saturation may be what bends the curve).
-        widened_from = shape_off(res.nominal_refit);
-        none_only = shape_tried = !widened_from.empty();
-      }
       if (!widened_from.empty()) {
         o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
-        first_pass_simulations += problem.simulations();
+        earlier_simulations += problem.simulations();
         continue;
+      }
+      // f's shape alone at its bound: a wider f may make the data none, but effects are not fitted wider
+      // (a dead zone or a saturation may be what bends the curve).
+      if (const auto off = shape_off(res.nominal_refit); !off.empty()) {
+        int side_simulations = 0;
+        auto wide = none_with_a_wider_curve(model, data, options, off, side_simulations);
+        if (wide) {
+          wide->simulations = earlier_simulations + problem.simulations() + side_simulations;
+          return *std::move(wide);
+        }
+        earlier_simulations += side_simulations;
+        shape_tried = true;
       }
     }
     res.nominal_refit.widened_from = widened_from;
@@ -1847,12 +1867,12 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
                      second ? &second->candidates : nullptr);
       if (const auto d = second ? std::nullopt : leader_delay(res, problem, data, scale, o)) {
         second = SecondPass{res.alignment, res.candidates, *d, std::string(to_string(res.candidates[0].effect.kind))};
-        first_pass_simulations += problem.simulations();
+        earlier_simulations += problem.simulations();
         continue;
       }
       decide(res, problem, data, scale, o);
     }
-    res.simulations = first_pass_simulations + problem.simulations();
+    res.simulations = earlier_simulations + problem.simulations();
     return res;
   }
 }
