@@ -2,9 +2,11 @@
 
 #include <Eigen/Dense>
 #include <boost/math/distributions/students_t.hpp>
+#include <boost/math/tools/minima.hpp>
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <numbers>
 #include <numeric>
@@ -687,23 +689,30 @@ size_t window_samples(const Series& s, const DiagnosisOptions& o) {
   return std::max<size_t>(50, static_cast<size_t>(std::lround(o.window_s / s.sample_time_s)));
 }
 
-/// The `none` test on residuals: every window's mean square against the noise
-/// variance (chi-square, Bonferroni over the windows, with a margin for the
-/// uncertainty of the noise estimate), and Ljung-Box whiteness per recording
-/// (Bonferroni over the recordings). Half the false-alarm rate goes to each.
-NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat, double sigma,
-                   const DiagnosisOptions& o) {
-  NoneTest t;
-  t.false_alarm_rate = o.false_alarm_rate;
+/// The `none` test's threshold on one window's mean square over the noise variance: chi-square for its `n`
+/// samples, Bonferroni over all the recordings' windows, with a margin for the uncertainty of the noise
+/// estimate.
+double window_threshold(const std::vector<Series>& data, double n, const DiagnosisOptions& o) {
   size_t total = 0;
+  int windows = 0;
   for (const auto& s : data) {
-    const size_t w = window_samples(s, o);
-    t.windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / w));
+    windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / window_samples(s, o)));
     total += s.y_um.size();
   }
   // Relative standard error of a median-based sigma from `total` samples is ~1.17/sqrt(N): its
   // one-sided 99% bound widens the variance threshold by 2 * 2.33 * that.
   const double sigma_margin = 1.0 + 2.0 * 2.33 * 1.17 / std::sqrt(static_cast<double>(total));
+  return chi2_mean_upper_quantile(n, 0.5 * o.false_alarm_rate / windows) * sigma_margin;
+}
+
+/// The `none` test on residuals: every window's mean square against the noise
+/// variance (`window_threshold`), and Ljung-Box whiteness per recording
+/// (Bonferroni over the recordings). Half the false-alarm rate goes to each.
+NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat, double sigma,
+                   const DiagnosisOptions& o) {
+  NoneTest t;
+  t.false_alarm_rate = o.false_alarm_rate;
+  for (const auto& s : data) t.windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / window_samples(s, o)));
   constexpr int kLags = 10;
   t.whiteness_threshold = kLags * chi2_mean_upper_quantile(kLags, 0.5 * o.false_alarm_rate / static_cast<double>(data.size()));
   for (size_t r = 0; r < data.size(); ++r) {
@@ -716,7 +725,7 @@ NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vecto
       double ss = 0.0;
       for (size_t k = b; k < e; ++k) ss += res[k] * res[k];
       const double n = static_cast<double>(e - b), ratio = ss / n / (sigma * sigma);
-      const double thr = chi2_mean_upper_quantile(n, 0.5 * o.false_alarm_rate / t.windows) * sigma_margin;
+      const double thr = window_threshold(data, n, o);
       if (ratio / thr > t.worst_window_ratio / std::max(t.window_threshold, 1e-300) || t.window_threshold == 0.0) {
         t.worst_window_ratio = ratio;
         t.window_threshold = thr;
@@ -768,6 +777,65 @@ Nominal refit_nominal(Problem& p, const DiagnosisOptions& o) {
   double cost = 0.0;
   const auto z = fit_staged(p, space, space.z_of({}, Nominal{}), cost);
   return space.g_scale(z);
+}
+
+/// Fit error of each recording over its first `samples` for the nominal model refitted as `refit`, from the
+/// starts in force.
+std::vector<double> start_errors(Problem& p, const std::vector<Series>& data, const std::vector<size_t>& samples,
+                                 Nominal refit) {
+  const auto pred = p.predict({}, refit, true, false);
+  std::vector<double> out;
+  for (size_t r = 0; r < data.size(); ++r) {
+    double e = 0.0;
+    for (size_t k = 0; k < std::min(pred.y[r].size(), samples[r]); ++k) e += std::pow(data[r].y_um[k] - pred.y[r][k], 2);
+    out.push_back(e);
+  }
+  return out;
+}
+
+/// Refines each recording's rest voltage before its first sample (the problem's starts: u[0], or NaN for
+/// the voltage its first samples imply) by Brent's search on its fit error over its first window,
+/// for the nominal model refitted as `k`; kept only where it fits clearly better. Returns whether any moved.
+/// Neither guess is the rest in closed loop: the controller's first command carries its gain times the first
+/// error, and the first samples' level carries the sensor offset; the samples before the delayed first
+/// command then come from the wrong voltage.
+bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisOptions& o, Nominal k) {
+  auto starts = p.initial();
+  bool refined = false;
+  // The first window only: over the whole recording the start trades for a slow effect (a drift, a creep).
+  std::vector<size_t> window;
+  for (const auto& s : data) window.push_back(std::min(window_samples(s, o), s.y_um.size()));
+  const auto error_at = [&](size_t r, double v) {
+    auto trial = starts;
+    trial[r] = v;
+    p.set_initial(trial);
+    return start_errors(p, data, window, k)[r];
+  };
+  constexpr double kStartGain = 25.0;
+  constexpr int kBits = 24, kMaxIterations = 40;
+  for (size_t r = 0; r < data.size(); ++r) {
+    const auto [lo, hi] = std::minmax_element(data[r].u_V.begin(), data[r].u_V.end());
+    const double reach = 0.25 * std::max(*hi - *lo, 1e-6 * std::max(std::abs(*hi), 1.0));
+    // The voltage the first samples imply (NaN) follows the model each simulation runs; a refined start is
+    // held fixed, so it replaces that only when it fits clearly better.
+    double from = starts[r];
+    if (std::isnan(from)) {
+      AugmentedPlant plant(p.model(), p.delay(), data[r].sample_time_s, std::span<const Effect>{});
+      from = rest_from_output(plant, data[r]);
+    }
+    std::uintmax_t iterations = kMaxIterations;
+    const auto [best_V, best_error] = boost::math::tools::brent_find_minima(
+        [&](double v) { return error_at(r, v); }, from - reach, from + reach, kBits, iterations);
+    // Kept only when the first window fits clearly better (by 25 noise variances; where the start hardly
+    // matters, a dead zone about it or a start at rest, the search fits the noise) and the start alone then
+    // explains it (within the `none` test's window threshold): beside an effect the start trades for it
+    // (a large creep's onset), and held fixed it would spoil the effect's fit.
+    const double variance = std::pow(estimate_noise_sigma(data[r].y_um), 2), n = static_cast<double>(window[r]);
+    const bool explained = best_error <= n * variance * window_threshold(data, n, o);
+    if (explained && best_error < error_at(r, starts[r]) - kStartGain * variance) starts[r] = best_V, refined = true;
+  }
+  p.set_initial(starts);
+  return refined;
 }
 
 /// Alignment: the rest voltage each recording starts from (u[0] or the one its
@@ -1696,6 +1764,9 @@ double noise_sigma(const std::vector<Series>& data, const std::vector<std::vecto
 Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DiagnosisOptions& o,
                           Nominal& k) {
   k = refit_nominal(problem, o);
+  // The starts once more with the refitted model (with the nominal, far off, they trade for its error).
+  if (refine_starts(problem, data, o, k)) k = refit_nominal(problem, o);
+  res.alignment.initial_V = problem.initial();
   auto refit = problem.predict({}, k, true);
   auto& r = res.nominal_refit;
   r.gain = refit.gain;
