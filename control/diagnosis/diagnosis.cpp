@@ -886,9 +886,11 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
     a.note = "the model file declares io_delay_samples = " + std::to_string(*a.declared) + ", but the data fit best with " +
              fmt("%.2g", a.io_delay_samples) + " samples";
     if (a.io_delay_samples < *a.declared) {
-      // Less delay than declared cannot be an effect: run with the estimate and say so.
-      a.used_samples = a.io_delay_samples;
-      a.note += " (less than declared: the analysis uses the estimate)";
+      // Less delay than declared cannot be an effect, but the nominal model alone is drawn below the true
+      // delay by a mode's fast path or a creep: the analysis starts at the declared delay, and the leading
+      // candidates move it to the estimate only when they fit clearly better there (`leading_delay`).
+      a.note += " (less than declared: the analysis starts at the declared delay and checks the estimate with "
+                "the leading candidates)";
     } else {
       a.note += " (the excess is judged as a delay effect)";
     }
@@ -909,12 +911,13 @@ struct SecondPass {
   std::string leader;
 };
 
-/// The second pass's alignment: the first pass's estimates, with the delay its leading candidate fits best with.
+/// The second pass's alignment: the first pass's estimates, with the delay one of its leading candidates fits
+/// clearly better with.
 Alignment realign(Problem& p, Alignment a, int delay_samples, const std::string& leader) {
   a.note = (a.declared ? "the model file declares io_delay_samples = " + std::to_string(*a.declared)
                        : std::string("the model file does not declare io_delay_samples")) +
            "; the nominal model alone fits best with " + fmt("%.2g", a.io_delay_samples) + " samples, but fitted with " +
-           "the leading candidate (" + leader + ") the data take " + std::to_string(delay_samples) +
+           "a leading candidate (" + leader + ") the data take " + std::to_string(delay_samples) +
            ", which the analysis uses (an unmodelled effect pulls the nominal model's delay)";
   a.used_samples = delay_samples;
   p.set_delay(a.used_samples);
@@ -1254,7 +1257,7 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
-  fit_each(warm ? "candidate fits at the leader's delay" : "candidate fits", res.candidates, order, starts, res.held_out,
+  fit_each(warm ? "candidate fits at the new delay" : "candidate fits", res.candidates, order, starts, res.held_out,
            problem, data, scale, o);
   // What the loop's fit chose stays for the fits that follow (pairs with the loop).
   for (size_t i : order)
@@ -1262,39 +1265,58 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   rank_candidates(res, o);
 }
 
-/// The delay was estimated with the nominal model alone, which an unmodelled effect can pull off by a
-/// sample (on a closed-loop rig with one sample of delay and a creep, the nominal fits best with none).
-/// So the leading candidate is refitted at the neighbouring delays (and the declared one) that the file
-/// allows: up to the declared delay (more is a `delay` effect), any up to the search range when it is
-/// silent. Returns the delay it fits the fit segment clearly better with, if any: by a quarter of the excess
-/// it leaves at the first delay (the tie rule's share) and by a tenth of the noise variance (far above the
-/// spread between two fits at the noise floor).
-std::optional<int> leader_delay(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
-                                const DataScale& scale, const DiagnosisOptions& o) {
-  if (res.candidates.empty() || !res.candidates[0].fitted || res.candidates[0].effect.kind == EffectKind::delay) return {};
-  const auto& lead = res.candidates[0];
-  const int used = static_cast<int>(std::lround(res.alignment.used_samples));
-  const auto& declared = res.alignment.declared;
-  const int most = declared ? *declared : o.max_undeclared_delay_samples;
-  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
-  const FitSpace space({lead.effect.kind}, scale, true, o, &data);
-  const std::vector<Effect> e{lead.effect};
-  const double at_used = fit_mse(problem, e, nominal_of(lead));
+/// A delay other than the one in use, and the candidate that fits the data clearly better with it.
+struct DelayChoice {
+  int delay_samples = 0;
+  std::string candidate;
+};
+
+/// The delays `leading_delay` tries: the neighbours of the one in use, the declared one and the nominal
+/// model's estimate, up to the declared delay (more is a `delay` effect), any up to the search range when the
+/// file is silent.
+std::vector<int> delays_to_try(const Alignment& a, const DiagnosisOptions& o) {
+  const int used = static_cast<int>(std::lround(a.used_samples));
+  const int most = a.declared ? *a.declared : o.max_undeclared_delay_samples;
   std::vector<int> delays;
-  for (int d : {used - 1, used + 1, declared.value_or(used)})
+  for (int d : {used - 1, used + 1, a.declared.value_or(used), static_cast<int>(std::lround(a.io_delay_samples))})
     if (d >= 0 && d <= most && d != used && std::find(delays.begin(), delays.end(), d) == delays.end()) delays.push_back(d);
-  std::vector<double> mse(delays.size());
-  run_each("leader at other delays", delays.size(), problem, o, [&](size_t i, Problem& own) {
-    own.set_delay(delays[i]);
+  return delays;
+}
+
+/// The delay was estimated with the nominal model alone, which an unmodelled effect can pull off by a
+/// sample (on a closed-loop rig with one sample of delay and a creep, the nominal fits best with none; a
+/// mode's fast path draws it below the declared delay). So the two leading candidates are refitted at the
+/// other delays the file allows (`delays_to_try`): the runner-up too, because the leader is ranked at the
+/// wrong delay (a creep led a mode that way). Returns the delay one of them fits the fit segment clearly
+/// better with than the better of the two does at the delay in use, if any: by a quarter of the excess it
+/// leaves (the tie rule's share) and by a tenth of the noise variance (far above the spread between two fits
+/// at the noise floor).
+std::optional<DelayChoice> leading_delay(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                                         const DataScale& scale, const DiagnosisOptions& o) {
+  constexpr size_t kLeading = 2;
+  std::vector<const CandidateResult*> leading;
+  for (const auto& c : res.candidates)
+    if (c.fitted && c.effect.kind != EffectKind::delay && leading.size() < kLeading) leading.push_back(&c);
+  const auto delays = delays_to_try(res.alignment, o);
+  if (leading.empty() || delays.empty()) return {};
+  double at_used = INFINITY;
+  for (const auto* c : leading) at_used = std::min(at_used, fit_mse(problem, std::span(&c->effect, 1), nominal_of(*c)));
+  std::vector<double> mse(leading.size() * delays.size());
+  run_each("leading candidates at other delays", mse.size(), problem, o, [&](size_t i, Problem& own) {
+    const auto& c = *leading[i / delays.size()];
+    const FitSpace space({c.effect.kind}, scale, true, o, &data);
+    own.set_delay(delays[i % delays.size()]);
     double cost = 0.0;
-    const auto z = fit_staged(own, space, space.z_of(e, nominal_of(lead)), cost);
+    const auto z = fit_staged(own, space, space.z_of({c.effect}, nominal_of(c)), cost);
     mse[i] = fit_mse(own, space.effects(z), space.g_scale(z));
   });
+  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
   double best = at_used;
-  std::optional<int> better;
-  for (size_t i = 0; i < delays.size(); ++i) {
+  std::optional<DelayChoice> better;
+  for (size_t i = 0; i < mse.size(); ++i) {
     const double gain = at_used - mse[i];
-    if (mse[i] < best && gain > o.tie_fit_gain * (at_used - s2) && gain > o.ambiguity_margin * s2) best = mse[i], better = delays[i];
+    if (mse[i] < best && gain > o.tie_fit_gain * (at_used - s2) && gain > o.ambiguity_margin * s2)
+      best = mse[i], better = DelayChoice{delays[i % delays.size()], std::string(to_string(leading[i / delays.size()]->effect.kind))};
   }
   return better;
 }
@@ -1936,8 +1958,8 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
       // 5. the verdict.
       fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(),
                      second ? &second->candidates : nullptr);
-      if (const auto d = second ? std::nullopt : leader_delay(res, problem, data, scale, o)) {
-        second = SecondPass{res.alignment, res.candidates, *d, std::string(to_string(res.candidates[0].effect.kind))};
+      if (const auto d = second ? std::nullopt : leading_delay(res, problem, data, scale, o)) {
+        second = SecondPass{res.alignment, res.candidates, d->delay_samples, d->candidate};
         earlier_simulations += problem.simulations();
         continue;
       }
