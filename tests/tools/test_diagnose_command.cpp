@@ -341,6 +341,19 @@ TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   EXPECT_EQ(r.out_of_spec, 0);
 }
 
+TEST(DiagnoseIndependentSuite, AScoreOverNoCasesSaysSoInsteadOfNan) {
+  // A suite of `none` recordings only (generate.py --only none) has no single effects and no mixtures.
+  DirectorySuiteResult r;
+  r.cases = r.none_cases = 100;
+  r.false_alarms = 1;
+  const auto text = format_directory_suite(r);
+  EXPECT_EQ(text.find(" nan"), std::string::npos) << text;  // ("dominant" holds the letters)
+  EXPECT_NE(text.find("single-effect accuracy: no such cases"), std::string::npos) << text;
+  EXPECT_NE(text.find("mixtures with both effects named: no such cases"), std::string::npos) << text;
+  EXPECT_NE(text.find("held-out RMSE fitted/nominal on correct cases: no such cases"), std::string::npos) << text;
+  EXPECT_NE(text.find("false alarms on none 1/100 = 1.0% (target <= 2%: ratio 0.50)"), std::string::npos) << text;
+}
+
 TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   // The first 12 cases of tests/data/independent (made by a separate Python generator,
   // tests/data/independent/generate.py, from physical descriptions only; labels in labels.csv).
