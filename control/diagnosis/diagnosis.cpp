@@ -689,30 +689,39 @@ size_t window_samples(const Series& s, const DiagnosisOptions& o) {
   return std::max<size_t>(50, static_cast<size_t>(std::lround(o.window_s / s.sample_time_s)));
 }
 
-/// The `none` test's threshold on one window's mean square over the noise variance: chi-square for its `n`
-/// samples, Bonferroni over all the recordings' windows, with a margin for the uncertainty of the noise
-/// estimate.
-double window_threshold(const std::vector<Series>& data, double n, const DiagnosisOptions& o) {
-  size_t total = 0;
+/// The `none` test's threshold on one window's mean square over the noise variance: chi-square for the
+/// window's samples, Bonferroni over all the recordings' windows, with a margin for the uncertainty of the
+/// noise estimate.
+struct WindowLevel {
   int windows = 0;
+  double sigma_margin = 1.0;
+  [[nodiscard]] double threshold(double n, const DiagnosisOptions& o) const {
+    return chi2_mean_upper_quantile(n, 0.5 * o.false_alarm_rate / windows) * sigma_margin;
+  }
+};
+
+WindowLevel window_level(const std::vector<Series>& data, const DiagnosisOptions& o) {
+  WindowLevel l;
+  size_t total = 0;
   for (const auto& s : data) {
-    windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / window_samples(s, o)));
+    l.windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / window_samples(s, o)));
     total += s.y_um.size();
   }
   // Relative standard error of a median-based sigma from `total` samples is ~1.17/sqrt(N): its
   // one-sided 99% bound widens the variance threshold by 2 * 2.33 * that.
-  const double sigma_margin = 1.0 + 2.0 * 2.33 * 1.17 / std::sqrt(static_cast<double>(total));
-  return chi2_mean_upper_quantile(n, 0.5 * o.false_alarm_rate / windows) * sigma_margin;
+  l.sigma_margin = 1.0 + 2.0 * 2.33 * 1.17 / std::sqrt(static_cast<double>(total));
+  return l;
 }
 
 /// The `none` test on residuals: every window's mean square against the noise
-/// variance (`window_threshold`), and Ljung-Box whiteness per recording
+/// variance (`WindowLevel`), and Ljung-Box whiteness per recording
 /// (Bonferroni over the recordings). Half the false-alarm rate goes to each.
 NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat, double sigma,
                    const DiagnosisOptions& o) {
   NoneTest t;
   t.false_alarm_rate = o.false_alarm_rate;
-  for (const auto& s : data) t.windows += static_cast<int>(std::max<size_t>(1, s.y_um.size() / window_samples(s, o)));
+  const auto level = window_level(data, o);
+  t.windows = level.windows;
   constexpr int kLags = 10;
   t.whiteness_threshold = kLags * chi2_mean_upper_quantile(kLags, 0.5 * o.false_alarm_rate / static_cast<double>(data.size()));
   for (size_t r = 0; r < data.size(); ++r) {
@@ -725,7 +734,7 @@ NoneTest none_test(const std::vector<Series>& data, const std::vector<std::vecto
       double ss = 0.0;
       for (size_t k = b; k < e; ++k) ss += res[k] * res[k];
       const double n = static_cast<double>(e - b), ratio = ss / n / (sigma * sigma);
-      const double thr = window_threshold(data, n, o);
+      const double thr = level.threshold(n, o);
       if (ratio / thr > t.worst_window_ratio / std::max(t.window_threshold, 1e-300) || t.window_threshold == 0.0) {
         t.worst_window_ratio = ratio;
         t.window_threshold = thr;
@@ -813,6 +822,7 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
   };
   constexpr double kStartGain = 25.0;
   constexpr int kBits = 24, kMaxIterations = 40;
+  const auto level = window_level(data, o);
   for (size_t r = 0; r < data.size(); ++r) {
     const auto [lo, hi] = std::minmax_element(data[r].u_V.begin(), data[r].u_V.end());
     const double reach = 0.25 * std::max(*hi - *lo, 1e-6 * std::max(std::abs(*hi), 1.0));
@@ -828,10 +838,10 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
         [&](double v) { return error_at(r, v); }, from - reach, from + reach, kBits, iterations);
     // Kept only when the first window fits clearly better (by 25 noise variances; where the start hardly
     // matters, a dead zone about it or a start at rest, the search fits the noise) and the start alone then
-    // explains it (within the `none` test's window threshold): beside an effect the start trades for it
+    // explains it (within the `none` test's `WindowLevel`): beside an effect the start trades for it
     // (a large creep's onset), and held fixed it would spoil the effect's fit.
     const double variance = std::pow(estimate_noise_sigma(data[r].y_um), 2), n = static_cast<double>(window[r]);
-    const bool explained = best_error <= n * variance * window_threshold(data, n, o);
+    const bool explained = best_error <= n * variance * level.threshold(n, o);
     if (explained && best_error < error_at(r, starts[r]) - kStartGain * variance) starts[r] = best_V, refined = true;
   }
   p.set_initial(starts);
@@ -1130,12 +1140,10 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
   if (kind == EffectKind::hysteresis) {
     spaces.push_back(spaces.front());
     spaces.back().hold(EffectKind::hysteresis, 2, 0.0);  // spread 0
-  } else if (kind == EffectKind::saturation) {
+  } else if (const auto form = form_choice(kind);
+             form && (kind != EffectKind::bias_dependent_dynamics || slowest_pole_is_real(G))) {
     spaces.push_back(spaces.front());
-    spaces.back().hold(EffectKind::saturation, *form_choice(kind), 1.0);  // on the drive
-  } else if (kind == EffectKind::bias_dependent_dynamics && slowest_pole_is_real(G)) {
-    spaces.push_back(spaces.front());
-    spaces.back().hold(EffectKind::bias_dependent_dynamics, *form_choice(kind), 1.0);  // the slow pole alone
+    spaces.back().hold(kind, *form, 1.0);  // on the drive; the slow pole alone
   }
   return spaces;
 }
