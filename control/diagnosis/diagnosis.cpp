@@ -1038,9 +1038,16 @@ struct Excess {
     on_validation = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
     base = (*this)(nuis);
   }
-  double operator()(const ModelErrors& e) const {
+  /// The MSE on the segment that judges: held-out, or the fitting segment when the held-out data carry no
+  /// excess (a mode rung only by the start-up transient, which always falls in the first block's fit part).
+  double mse(const ModelErrors& e) const {
     const double r = on_validation ? e.rmse_validation_um : e.rmse_fit_um;
-    return r * r - s2;
+    return r * r;
+  }
+  double operator()(const ModelErrors& e) const { return mse(e) - s2; }
+  /// The ranking score: that MSE with a relative penalty per fitted parameter.
+  double score(const ModelErrors& e, size_t parameters, const DiagnosisOptions& o) const {
+    return mse(e) * (1.0 + o.penalty_per_parameter * static_cast<double>(parameters));
   }
 };
 
@@ -1191,8 +1198,6 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   const auto pred = problem.predict(e, nominal_of(c), true);
   c.gain = pred.gain;
   c.errors = errors_of(data, pred.y, held_out);
-  c.score = c.errors.rmse_validation_um * c.errors.rmse_validation_um *
-            (1.0 + o.penalty_per_parameter * static_cast<double>(c.specs.size()));
 }
 
 /// Fits `candidates[i]` for every i in `which` from starts[i]: every (candidate, space, start) is a
@@ -1245,8 +1250,12 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
     std::swap(res.candidates[0], res.candidates[1]);
 }
 
-/// Fitted candidates by held-out score (then the rest by evidence), ties broken on the fit segment.
+/// Fitted candidates by penalised score on the judging segment (Excess: held-out unless it carries no
+/// excess), then the rest by evidence; ties broken on the fit segment.
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
+  const Excess excess(res);
+  for (auto& c : res.candidates)
+    if (c.fitted) c.score = excess.score(c.errors, c.specs.size(), o);
   std::stable_sort(res.candidates.begin(), res.candidates.end(), [](const CandidateResult& a, const CandidateResult& b) {
     if (a.fitted != b.fitted) return a.fitted;
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
@@ -1432,8 +1441,7 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
     p.gain = pred.gain;
     p.errors = errors_of(data, pred.y, res.held_out);
     p.y = std::move(pred.y);
-    p.score = p.errors.rmse_validation_um * p.errors.rmse_validation_um *
-              (1.0 + o.penalty_per_parameter * static_cast<double>(spaces[i].specs.size() - 1));
+    p.score = Excess(res).score(p.errors, spaces[i].specs.size() - 1, o);
     if (p.score < best.score) best = std::move(p);
   }
   return best;
@@ -1689,14 +1697,19 @@ std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bo
           : "";
   const std::string lead = "The nominal model leaves a residual of " + fmt("%.3g", res.baseline.rmse_um) +
                            " um RMS (nuisance-only refit: " + fmt("%.3g", nuis.rmse_um) + " um) against " +
-                           fmt("%.3g", res.noise_sigma_um) + " um of sensor noise. ";
+                           fmt("%.3g", res.noise_sigma_um) + " um of sensor noise. " +
+                           (excess.on_validation ? ""
+                                                 : "The held-out data carry no excess over the noise (the mismatch "
+                                                   "lies in the fitting segment, such as a start-up transient), so "
+                                                   "the candidates are judged on the fitting segment. ");
+  const std::string segment = excess.on_validation ? "held-out" : "fitting-segment";
   if (res.mixture.empty())
     return lead + "No candidate explains it: the best (" + std::string(to_string(best.effect.kind)) + ") leaves " +
            fmt("%.0f", 100.0 * std::max(excess(best.errors), 0.0) / std::max(excess.base, 1e-300)) +
            "% of the excess residual variance" + runner_up + ".";
   const double removed = 1.0 - std::max(excess(best.errors), 0.0) / std::max(excess.base, 1e-300);
   std::string text = lead + "Best explanation (removes " + fmt("%.0f", 100.0 * removed) +
-                     "% of the excess held-out variance): " + best.explanation;
+                     "% of the excess " + segment + " variance): " + best.explanation;
   if (pair)
     text = lead + "Two effects, each significant on held-out data: " + res.verdict + " (dominant, removes " +
            fmt("%.3g", res.contribution[0]) + " um^2 of held-out MSE) and " +

@@ -804,13 +804,13 @@ def plan_cases(N, rng, only=None, mode="tune"):
     return [plan[i] for i in idx]
 
 
-def make_case(ci, effects, seed, fast=False, subset=False, attempt=0):
+def make_case(ci, effects, seed, fast=False, subset=False, attempt=0, force_closed=False):
     rng = np.random.default_rng([seed, ci, 7919] if attempt == 0 else [seed, ci, 7919, attempt])
     case = Case()
     case.idx = ci
     case.effects = effects
-    closed = rng.random() < 0.4
-    if "delay" in effects and rng.random() < 0.5:
+    closed = rng.random() < 0.4 or force_closed
+    if "delay" in effects and rng.random() < 0.5 and not force_closed:
         closed = False
     if "dead_zone" in effects:
         closed = False  # closed-loop references keep u far from the zone
@@ -1332,10 +1332,11 @@ def write_labels(rows, outdir):
 
 
 def gen_one(args_tuple):
-    ci, effects, seed, fast, subset, outdir = args_tuple
+    ci, effects, seed, fast, subset, outdir, force_closed = args_tuple
     t0 = time.time()
     for attempt in range(6):
-        case = make_case(ci, effects, seed, fast=fast, subset=subset, attempt=attempt)
+        case = make_case(ci, effects, seed, fast=fast, subset=subset, attempt=attempt,
+                         force_closed=force_closed)
         run_case(case, fast=fast)
         ok = np.isfinite(case.r_all) and all(np.isfinite(r) and 2.95 <= r <= 8.05 for r, _, _ in case.indiv)
         ok = ok and all(np.all(np.isfinite(o[1])) for o in case.outs)
@@ -1361,13 +1362,15 @@ def main():
     ap.add_argument("--mode", default=None, choices=[None, "tune", "eval", "subset"])
     ap.add_argument("--subset", action="store_true", help="subset constraints (<=1 kHz, <=30 s, <=2 recs)")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--closed", action="store_true",
+                    help="closed loop wherever the effect allows it (not dead_zone); draws stay aligned")
     a = ap.parse_args()
     mode = a.mode or ("subset" if a.subset else ("eval" if a.cases >= 200 else "tune"))
     prng = np.random.default_rng([a.seed, 4242])
     plan = plan_cases(a.cases, prng, a.only, mode)
     os.makedirs(a.out, exist_ok=True)
     K = a.first if a.first is not None else a.cases
-    tasks = [(i, plan[i], a.seed, a.fast, a.subset, a.out) for i in range(K)]
+    tasks = [(i, plan[i], a.seed, a.fast, a.subset, a.out, a.closed) for i in range(K)]
     rows = []
     if a.jobs > 1:
         import multiprocessing as mp
