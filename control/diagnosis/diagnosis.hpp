@@ -228,14 +228,20 @@ TransferFunction time_scaled(const TransferFunction& G, double factor);
 /// A one-sided test that model b predicts the held-out data better than model a.
 struct HeldOutTest {
   double mean_um2 = 0.0;   ///< mean held-out squared-error reduction (a's MSE minus b's)
-  double t = 0.0, threshold = 0.0;
+  double t = 0.0, threshold = 0.0;  ///< the t statistic and its threshold at half the level
+  double signed_rank_p = 1.0;       ///< one-sided p-value of the Wilcoxon signed-rank test on the blocks
   int blocks = 0;           ///< blocks tested
   bool significant = false;
 };
 
+/// One-sided p-value P(W+ >= observed) of the Wilcoxon signed-rank statistic of `x` (zeros dropped,
+/// average ranks on ties) under symmetry about 0: exact up to 300 values, the normal approximation above.
+double signed_rank_p(const std::vector<double>& x);
+
 /// Compares two predictions on the held-out samples: the squared-error differences averaged in blocks
-/// of `block_s` seconds (a model error is correlated in time), their mean against its standard error
-/// (Student t, blocks - 1 degrees of freedom) at one-sided level `level`. Blocks where the two predictions
+/// of `block_s` seconds (a model error is correlated in time), b better than a when either of two one-sided
+/// tests passes at half of `level` (Bonferroni): their mean against its standard error (Student t, blocks - 1
+/// degrees of freedom), or their signed ranks (Wilcoxon, signed_rank_p). Blocks where the two predictions
 /// differ by less than `indistinct_um2` (mean square) carry no evidence and are left out of the test (not of
 /// `mean_um2`, which is over every block). Fewer than 3 blocks tested: not significant.
 HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
