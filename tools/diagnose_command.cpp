@@ -380,6 +380,8 @@ std::string extension_json(const DiagnosisResult& r) {
       << ", \"heldout_mse_removed_um2\": " << number_or_null(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";
   }
   j << "],\n  \"ambiguous_with\": " << quoted_array(r.ambiguous_with) << ",\n";
+  j << "  \"candidates_judged_on\": "
+    << (r.candidates_judged_on.empty() ? std::string("null") : quoted(r.candidates_judged_on)) << ",\n";
   if (!r.ambiguous_with.empty()) j << "  \"separating_experiment\": " << quoted(r.separating_experiment) << ",\n";
   j << "  \"withheld_second_effect\": "
     << (r.withheld_second.empty() ? std::string("null")

@@ -1788,6 +1788,7 @@ std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bo
 void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
             const DiagnosisOptions& o) {
   const Excess excess(res);
+  res.candidates_judged_on = excess.on_validation ? "held_out" : "fitting_segment";
   PairFit pair;
   if (res.candidates.front().fitted && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
   if (std::isfinite(pair.score)) refit_members_alone(res, pair, problem, data, scale, o);

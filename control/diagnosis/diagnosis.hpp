@@ -157,6 +157,9 @@ struct DiagnosisResult {
   std::vector<double> contribution;  ///< per mixture element: held-out MSE it removes (um^2)
   std::vector<std::string> ambiguous_with;  ///< effects that explain the held-out data as well as the verdict
   std::string separating_experiment;        ///< what would tell them apart (when ambiguous_with is not empty)
+  /// Where the candidates were ranked and judged: "held_out", or "fitting_segment" when the held-out data
+  /// carry no excess (the mismatch lies in the fitting segment only); empty when none were fitted (`none`).
+  std::string candidates_judged_on;
   /// A second effect significant on held-out data beside the verdict but not named, because the pair's
   /// nominal refit stops at its tolerance on `withheld_at_bounds` (it may stand in for the nominal's error).
   std::string withheld_second;

@@ -232,7 +232,7 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   const auto json = read(a.json);
   for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
                           "\"declared\": null", "\"offset_um\": ", "\"at_bounds\": [", "\"widened\": false",
-                          "\"widened_from\": []", "\"withheld_second_effect\": "})
+                          "\"widened_from\": []", "\"withheld_second_effect\": ", "\"candidates_judged_on\": \"held_out\""})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
   // The augmented model keeps the user's [controller] table and the sim backend accepts it.
   const auto text = read(o.augmented_model_path);

@@ -45,6 +45,7 @@ TEST(Diagnose, NominalDataWithNoiseIsNone) {
   const auto r = diagnose(paper_model(3), {recording({}, 0.05)});
   EXPECT_EQ(r.verdict, "none");
   EXPECT_TRUE(r.mismatch.empty());
+  EXPECT_TRUE(r.candidates_judged_on.empty());  // no candidate was fitted
   EXPECT_NEAR(r.baseline.rmse_um, 0.05, 0.005);
   EXPECT_TRUE(r.nominal_refit.at_bounds.empty());
 }
@@ -228,6 +229,7 @@ TEST(Diagnose, FindsAStructuralModeInParallelWithTheSlowGel) {
   const Effect truth{EffectKind::resonance, {6.0, 0.03, 1.0, 0.04}};
   const auto r = diagnose(paper_model(3), {recording(truth, 0.05)});
   ASSERT_EQ(r.verdict, "resonance") << r.explanation;
+  EXPECT_EQ(r.candidates_judged_on, "held_out");
   EXPECT_NEAR(r.effect.p[0], 6.0, 0.3);
   EXPECT_GT(r.effect.p[3], 0.02);  // the parallel share carries the mode
   EXPECT_LT(r.fitted.rmse_validation_um, 0.055);
@@ -294,6 +296,7 @@ TEST(Diagnose, AModeRungOnlyByTheStartIsJudgedOnTheFittingSegment) {
   ASSERT_LT(nuis.rmse_validation_um * nuis.rmse_validation_um - s2, 0.2 * s2);
   ASSERT_EQ(r.verdict, "resonance") << r.explanation;
   EXPECT_NE(r.explanation.find("judged on the fitting segment"), std::string::npos) << r.explanation;
+  EXPECT_EQ(r.candidates_judged_on, "fitting_segment");
   EXPECT_NEAR(r.effect.p[0], 6.0, 0.3);
   EXPECT_LT(r.fitted.rmse_fit_um, 1.1 * r.noise_sigma_um);
 }
