@@ -1233,20 +1233,26 @@ void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, 
     finish_candidate(candidates[which[w]], spaces[w], best[w], held_out, problem, data, o);
 }
 
+/// Whether the fitting segment separates candidates `a` and `b` that the held-out data cannot: `a`
+/// explains it clearly better, by a share of what `b` leaves there and by the ambiguity margin of what the
+/// nuisance-only refit leaves there (two fits at the noise floor differ by noise).
+bool fit_segment_prefers(const CandidateResult& a, const CandidateResult& b, const DiagnosisResult& res,
+                         const DiagnosisOptions& o) {
+  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
+  const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - s2; };
+  const double gain = fit_excess(b.errors) - fit_excess(a.errors);
+  return gain > o.tie_fit_gain * fit_excess(b.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors);
+}
+
 /// When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
 /// of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
-/// its low-frequency gain), the one that explains the fitting segment clearly better leads: by a share of
-/// what the leader leaves there and by the ambiguity margin of what the nuisance-only refit leaves there
-/// (two fits at the noise floor differ by noise).
+/// its low-frequency gain), the one that explains the fitting segment clearly better leads.
 void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
   if (res.candidates.size() < 2 || !res.candidates[1].fitted) return;
   const Excess excess(res);
   const auto& a = res.candidates[0];
   const auto& b = res.candidates[1];
-  const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - excess.s2; };
-  const double gain = fit_excess(a.errors) - fit_excess(b.errors);
-  if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base &&
-      gain > o.tie_fit_gain * fit_excess(a.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors))
+  if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base && fit_segment_prefers(b, a, res, o))
     std::swap(res.candidates[0], res.candidates[1]);
 }
 
@@ -1372,72 +1378,93 @@ std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& prob
   return out;
 }
 
-/// The starts of the second effect: with o.forward_pairs, the forward selection's best; then the three
-/// best fitted single runners-up that can run with the leader (a second effect large enough to nearly lead
-/// alone, which the leader's fit may have partly absorbed, so its evidence in the leader's residual is
-/// weak) when not already among them.
-std::vector<Effect> second_effects(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
-                                   const DataScale& scale, const DiagnosisOptions& o) {
+/// A pair to fit jointly: the leader and the second effect, and, for a
+/// second effect from the forward selection that was also fitted alone, its grid point in the leader's
+/// residual (a start of its own: a mode fitted alone at the wrong frequency sits far from the pair's).
+struct PairPlan {
+  Effect lead, second;
+  std::optional<Effect> grid_second;
+};
+
+/// The pairs worth fitting: with o.forward_pairs, the forward selection's best second effects; then the
+/// three best fitted single runners-up that can run with the leader as fitted (a second effect large
+/// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
+/// leader's residual is weak) when not already among them. A forward kind whose own fit cannot run
+/// beside the leader in the form it chose (bias-dependent dynamics on G's slow pole alone beside creep or
+/// a mode) starts from its grid point alone.
+std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                                 const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  std::vector<Effect> out;
-  if (o.forward_pairs) out = second_effect_starts(a, problem, data, scale, o, kPairsTried);
-  // A kind fitted on its own starts from that fit, not from its grid point in the leader's residual: the
-  // grid start of a loop beside a creep settled where the loop explained nothing (the effect-chain rig).
-  for (Effect& e : out)
-    if (const auto* own = fitted_candidate(res, e.kind)) e = own->effect;
-  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i) {
-    const Effect& b = res.candidates[i].effect;
-    if (!can_run_together(a.effect, b)) continue;
-    if (std::none_of(out.begin(), out.end(), [&](const Effect& e) { return e.kind == b.kind; })) out.push_back(b);
-    ++added;
-  }
+  std::vector<PairPlan> out;
+  // Whether `b` takes one of the runners-up's places: it runs beside the leader.
+  const auto add = [&](const Effect& b, std::optional<Effect> grid) {
+    if (std::any_of(out.begin(), out.end(), [&](const PairPlan& p) { return p.second.kind == b.kind; })) return true;
+    if (!can_run_together(a.effect, b)) return false;
+    out.push_back({a.effect, b, grid});
+    return true;
+  };
+  // A kind fitted on its own starts from that fit too: the grid start alone of a loop beside a creep
+  // settled where the loop explained nothing (the effect-chain rig).
+  if (o.forward_pairs)
+    for (const Effect& g : second_effect_starts(a, problem, data, scale, o, kPairsTried)) {
+      const auto* own = fitted_candidate(res, g.kind);
+      if (own && can_run_together(a.effect, own->effect))
+        add(own->effect, g);
+      else
+        add(g, std::nullopt);
+    }
+  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i)
+    added += add(res.candidates[i].effect, std::nullopt) ? 1 : 0;
   return out;
 }
 
-/// The starts of the leader `a` and a second effect `b` fitted jointly: the leader as fitted alone (start 0),
-/// and the leader re-gridded beside `b`'s own fit (start 1: a leader fitted alone has absorbed part of the
-/// second effect, and the pair's optimum may sit far from it: a hysteresis + creep rig's loop at 0.4x its
-/// alpha).
-constexpr size_t kPairStarts = 2;
+/// The starts of a pair: the leader as fitted alone beside the second effect (start 0); the leader
+/// re-gridded beside the second effect (start 1: a leader fitted alone has absorbed part of the second
+/// effect, and the pair's optimum may sit far from it: a hysteresis + creep rig's loop at 0.4x its
+/// alpha); the leader as fitted alone beside the second effect's grid point, when the plan has one.
+size_t pair_starts(const PairPlan& plan) { return plan.grid_second ? 3 : 2; }
 
-Eigen::VectorXd pair_start(size_t start, const DiagnosisResult& res, Problem& problem, const FitSpace& space,
-                           const Effect& b, const std::vector<Series>& data, const DataScale& scale,
+Eigen::VectorXd pair_start(size_t start, const PairPlan& plan, const DiagnosisResult& res, Problem& problem,
+                           const FitSpace& space, const std::vector<Series>& data, const DataScale& scale,
                            const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  if (start == 0) return space.z_of({a.effect, b}, nominal_of(a));
-  const auto* fitted_b = fitted_candidate(res, b.kind);
+  if (start == 0) return space.z_of({plan.lead, plan.second}, nominal_of(a));
+  if (start == 2) return space.z_of({plan.lead, *plan.grid_second}, nominal_of(a));
+  const auto* fitted_b = fitted_candidate(res, plan.second.kind);
   const Nominal kb = fitted_b ? nominal_of(*fitted_b) : Nominal{};
-  const FitSpace lead({a.effect.kind}, scale, false, o, &data);
+  FitSpace lead({plan.lead.kind}, scale, false, o, &data);
+  if (const auto i = form_choice(plan.lead.kind)) lead.hold(plan.lead.kind, *i, plan.lead.p[*i]);
   const auto regrid = coarse_grid(lead, [&](const Effect& x) {
-    const std::vector<Effect> e{x, b};
+    const std::vector<Effect> e{x, plan.second};
     return problem.residual(e, kb).squaredNorm();
   });
-  return space.z_of({lead.effects(regrid.front().second).front(), b}, kb);
+  return space.z_of({lead.effects(regrid.front().second).front(), plan.second}, kb);
 }
 
-/// Fits the best single effect jointly with each of the most promising second effects, every (second
-/// effect, start) a task of its own; each pair keeps its better start (the first on a tie).
+/// Fits the best single effect jointly with each of the most promising second effects, every (pair,
+/// start) a task of its own; each pair keeps its best start (the first on a tie).
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o) {
-  const auto& a = res.candidates.front();
-  const auto seconds = second_effects(res, problem, data, scale, o);
+  const auto plans = pair_plans(res, problem, data, scale, o);
   std::vector<FitSpace> spaces;
-  for (const auto& b : seconds) {
-    spaces.emplace_back(std::vector<EffectKind>{a.effect.kind, b.kind}, scale, true, o, &data);
-    for (const Effect& e : {a.effect, b})  // the form its own fit chose
-      if (const auto i = form_choice(e.kind)) spaces.back().hold(e.kind, *i, e.p[*i]);
+  std::vector<std::pair<size_t, size_t>> tasks;  // (plan, start)
+  for (size_t i = 0; i < plans.size(); ++i) {
+    spaces.emplace_back(std::vector<EffectKind>{plans[i].lead.kind, plans[i].second.kind}, scale, true, o, &data);
+    for (const Effect& e : {plans[i].lead, plans[i].second})  // the form its own fit chose
+      if (const auto f = form_choice(e.kind)) spaces.back().hold(e.kind, *f, e.p[*f]);
+    for (size_t s = 0; s < pair_starts(plans[i]); ++s) tasks.emplace_back(i, s);
   }
-  std::vector<std::pair<double, Eigen::VectorXd>> fits(seconds.size() * kPairStarts);
+  std::vector<std::pair<double, Eigen::VectorXd>> fits(tasks.size());
   run_each("pair fits", fits.size(), problem, o, [&](size_t t, Problem& own) {
-    const size_t i = t / kPairStarts;
+    const auto [i, start] = tasks[t];
     auto& [cost, z] = fits[t];
-    z = fit_staged(own, spaces[i], pair_start(t % kPairStarts, res, own, spaces[i], seconds[i], data, scale, o), cost);
+    z = fit_staged(own, spaces[i], pair_start(start, plans[i], res, own, spaces[i], data, scale, o), cost);
   });
   PairFit best;
-  for (size_t i = 0; i < seconds.size(); ++i) {
-    const auto* chosen = &fits[i * kPairStarts];
-    for (size_t j = 1; j < kPairStarts; ++j)
-      if (fits[i * kPairStarts + j].first < chosen->first) chosen = &fits[i * kPairStarts + j];
+  for (size_t i = 0, t = 0; i < plans.size(); t += pair_starts(plans[i]), ++i) {
+    const auto* chosen = &fits[t];
+    for (size_t j = 1; j < pair_starts(plans[i]); ++j)
+      if (fits[t + j].first < chosen->first) chosen = &fits[t + j];
     PairFit p;
     p.effects = spaces[i].effects(chosen->second);
     p.nominal = spaces[i].g_scale(chosen->second);
@@ -1689,13 +1716,16 @@ bool withhold_second(DiagnosisResult& res, const PairFit& pair, const DiagnosisO
 }
 
 /// Equally good single explanations are an answer, not a coin toss: the candidates that also explain
-/// the excess and come within the ambiguity margin of the leader, and what would separate them.
+/// the excess and come within the ambiguity margin of the leader, unless the fitting segment clearly
+/// prefers the leader (the real piezo's remanence, which a drift stepping in 0.2 s at the sine's onset
+/// matched on held-out data only), and what would separate them.
 void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisOptions& o) {
   const auto& best = res.candidates.front();
   for (size_t i = 1; i < res.candidates.size(); ++i) {
     const auto& c = res.candidates[i];
     if (c.fitted && excess(c.errors) <= o.explained_excess * excess.base &&
-        excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base)
+        excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base &&
+        !fit_segment_prefers(best, c, res, o))
       res.ambiguous_with.emplace_back(to_string(c.effect.kind));
   }
   if (!res.ambiguous_with.empty())
