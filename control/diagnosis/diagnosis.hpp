@@ -67,6 +67,10 @@ struct DiagnosisOptions {
   double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per fitted parameter
   double tie_fit_gain = 0.25;         ///< of two candidates the held-out data cannot separate (ambiguity_margin), the
                                       ///< runner-up leads when its fit-segment excess MSE is this share lower
+  double ambiguity_fit_gain = 0.5;    ///< a candidate that explains the held-out data as well as the verdict is
+                                      ///< not called ambiguous when the verdict's fit-segment excess MSE is this
+                                      ///< share lower than its own (stricter than tie_fit_gain: an order between
+                                      ///< two near-equal answers needs less evidence than dropping one of them)
   double explained_excess = 0.5;      ///< the chosen effect must leave at most this share of the excess held-out MSE
   int candidates_to_fit = 10;          ///< the leading candidates (by evidence) that are fitted fully
   /// Runs task(i) for every i below count and returns when all are done; the tasks are independent (each

@@ -252,6 +252,26 @@ DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vec
   return run_diagnose(a);
 }
 
+/// One recording and its model file, loaded for control::diagnosis::diagnose directly (options the
+/// command line does not expose), with the model file's I/O delay in the options.
+struct LibraryCase {
+  LoadedModel model;
+  control::diagnosis::Series series;
+  control::diagnosis::DiagnosisOptions options;
+};
+
+LibraryCase load_library_case(const std::string& model_path, const std::string& csv_path) {
+  LibraryCase c{load_model(model_path), {}, {}};
+  const Recording rec = read_recording(csv_path);
+  c.series.t_s = rec.col("t_s");
+  c.series.u_V = rec.col("u_V");
+  c.series.y_um = rec.col("y_um");
+  c.series.sample_time_s = rec.sample_time_s;
+  c.options.io_delay_samples = c.model.io_delay_samples;
+  c.options.io_delay_declared = c.model.io_delay_declared;
+  return c;
+}
+
 TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsHysteresisAtUnderHalfTheLinearModelsError) {
   // A real piezo stack (tests/data/real/piezo_smarthysteresis, SOURCE.md: +-150 V, 1 Hz; the source documents
   // hysteresis) against its best linear model (fit_linear.py). Before the sine it rests 3 s at 0 V below the
@@ -274,18 +294,9 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsNotAmbiguousWithADriftThatMat
   // 0.2 s after the sine's onset: within the ambiguity margin of the loop on held-out data (0.232 against
   // 0.203 um), but leaving almost three times the loop's excess on the fitting segment, so not "as well".
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/piezo_smarthysteresis/";
-  const LoadedModel lm = load_model(dir + "linear_model.toml");
-  const Recording rec = read_recording(dir + "piezo_smarthysteresis.csv");
-  control::diagnosis::Series s;
-  s.t_s = rec.col("t_s");
-  s.u_V = rec.col("u_V");
-  s.y_um = rec.col("y_um");
-  s.sample_time_s = rec.sample_time_s;
-  control::diagnosis::DiagnosisOptions o;
-  o.io_delay_samples = lm.io_delay_samples;
-  o.io_delay_declared = lm.io_delay_declared;
-  o.forward_pairs = true;
-  const auto r = control::diagnosis::diagnose(lm.model, {s}, o);
+  auto rig = load_library_case(dir + "linear_model.toml", dir + "piezo_smarthysteresis.csv");
+  rig.options.forward_pairs = true;
+  const auto r = control::diagnosis::diagnose(rig.model.model, {rig.series}, rig.options);
   ASSERT_EQ(r.verdict, "hysteresis") << r.explanation;
   const auto drift = std::find_if(r.candidates.begin(), r.candidates.end(),
                                   [](const auto& c) { return c.effect.kind == EffectKind::drift; });
@@ -312,6 +323,37 @@ TEST(DiagnoseRealRecordings, PiezoP885IsHysteresisAtUnderHalfTheLinearModelsErro
   EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
   EXPECT_LT(r.mixture.front().p[0], kMaxCompensatedHysteresisAlpha);
+}
+
+TEST(DiagnoseAmbiguity, ACreepThatLeadsALoopOnlyByAModestFitSegmentMarginLeavesTheLoopNamed) {
+  // Case 58 of the closed-loop tuning set (tests/data/ambiguous_creep_loop/README.md): a Preisach loop under
+  // closed loop, which a creep and the loop explain equally well on held-out data. The fitting segment puts
+  // the creep first by a margin that orders the two (tie_fit_gain) but does not drop the loop
+  // (ambiguity_fit_gain); with the stricter share set to the tie-break's, the loop is dropped.
+  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/ambiguous_creep_loop/";
+  auto rig = load_library_case(dir + "model.toml", dir + "rec0.csv");
+  auto& o = rig.options;
+  const auto r = control::diagnosis::diagnose(rig.model.model, {rig.series}, o);
+  std::vector<std::string> named = r.ambiguous_with;
+  named.push_back(r.verdict);
+  const auto has = [&](const char* k) { return std::find(named.begin(), named.end(), k) != named.end(); };
+  EXPECT_TRUE(has("hysteresis") && has("creep")) << r.explanation;
+  EXPECT_NE(r.separating_experiment.find("hold the voltage constant"), std::string::npos) << r.explanation;
+  // The premise: the verdict leads the other on the fitting segment by more than the tie-break's share.
+  const auto other = std::find_if(r.candidates.begin(), r.candidates.end(), [&](const auto& c) {
+    const auto k = std::string(to_string(c.effect.kind));
+    return (k == "hysteresis" || k == "creep") && k != r.verdict;
+  });
+  ASSERT_NE(other, r.candidates.end());
+  const double s2 = r.noise_sigma_um * r.noise_sigma_um;
+  const double lead_fit = std::pow(r.candidates.front().errors.rmse_fit_um, 2) - s2, other_fit = std::pow(other->errors.rmse_fit_um, 2) - s2;
+  EXPECT_LT(lead_fit, (1.0 - o.tie_fit_gain) * other_fit);
+  EXPECT_GT(lead_fit, (1.0 - o.ambiguity_fit_gain) * other_fit);
+  o.ambiguity_fit_gain = o.tie_fit_gain;
+  const auto strict = control::diagnosis::diagnose(rig.model.model, {rig.series}, o);
+  EXPECT_EQ(strict.verdict, r.verdict);
+  EXPECT_EQ(std::count(strict.ambiguous_with.begin(), strict.ambiguous_with.end(), std::string(to_string(other->effect.kind))), 0)
+      << strict.explanation;
 }
 
 TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNotNamed) {
