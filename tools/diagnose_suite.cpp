@@ -186,6 +186,7 @@ struct CaseOutcome {
   std::string leaders;  ///< the three best fitted candidates and the share of the excess each leaves
   std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
   std::string withheld;   ///< DiagnosisResult::withheld_second
+  std::string ambiguous;  ///< DiagnosisResult::ambiguous_with, '+'-separated
   bool widened = false;   ///< NominalRefit::widened
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
 };
@@ -223,6 +224,7 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.leaders = leaders_text(d);
     o.at_bounds = join(d.nominal_refit.at_bounds, ",");
     o.withheld = d.withheld_second;
+    o.ambiguous = join(d.ambiguous_with, "+");
     o.widened = d.nominal_refit.widened();
   } catch (const std::exception& e) {
     o.verdict = "error";
@@ -263,11 +265,12 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     const auto& c = cases[i];
     const auto& o = out[i];
     char line[960];
-    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s\n",
+    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s\n",
                   c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
                   scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(),
                   o.widened ? "  widened" : "", o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
-                  o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(), o.error.empty() ? "" : "  error: ",
+                  o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(),
+                  o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), o.error.empty() ? "" : "  error: ",
                   o.error.c_str());
     const std::lock_guard lock(log_mutex);
     log << line << std::flush;
@@ -301,6 +304,11 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
       r.false_alarms += o.verdict != "none";
     } else {
       ++r.single_cases;
+      if (!o.ambiguous.empty()) {
+        ++r.single_ambiguous;
+        r.single_ambiguous_right += o.verdict == c.effects;
+        r.single_truth_among_ambiguous += o.verdict != c.effects && lists(o.ambiguous, c.effects);
+      }
       if (o.verdict == c.effects) {
         ++r.single_correct;
         r.ratios.push_back(o.ratio);
@@ -352,14 +360,16 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
                 "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
                 "refit widened (not none at the ordinary tolerances; the gain stopped at its own, or f's shape did and "
-                "the widened refit was none): %d cases, %d of them right\n",
+                "the widened refit was none): %d cases, %d of them right\n"
+                "single effects answered as ambiguous: %d (the verdict right in %d; the truth among the other names in %d)\n",
                 r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed,
                 score("single-effect accuracy", r.single_correct, r.single_cases, ">= 95%", 95.0).c_str(),
                 score("false alarms on none", r.false_alarms, r.none_cases, "<= 2%", 2.0).c_str(),
                 score("mixtures with both effects named", r.mixture_both_named, r.mixture_cases, ">= 80%", 80.0).c_str(),
                 r.mixture_dominant_correct, r.mixture_cases, held_out_ratios(r).c_str(), r.mean_case_s, r.max_case_s,
                 r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
-                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right);
+                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right,
+                r.single_ambiguous, r.single_ambiguous_right, r.single_truth_among_ambiguous);
   return s + b;
 }
 

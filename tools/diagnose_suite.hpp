@@ -61,6 +61,9 @@ struct DirectorySuiteResult {
   int false_second = 0, withheld = 0, withheld_true = 0;
   /// Cases diagnosed with the widened refit (NominalRefit::widened), and how many of them were scored right.
   int widened = 0, widened_right = 0;
+  /// Single-effect cases answered with ambiguous_with, those whose verdict is right, and those whose verdict
+  /// is wrong but whose ambiguous names hold the truth (a hedge that holds the answer, with an experiment).
+  int single_ambiguous = 0, single_ambiguous_right = 0, single_truth_among_ambiguous = 0;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

@@ -425,6 +425,29 @@ TEST(DiagnoseIndependentSuite, AScoreOverNoCasesSaysSoInsteadOfNan) {
   EXPECT_NE(text.find("false alarms on none 1/100 = 1.0% (target <= 2%: ratio 0.50)"), std::string::npos) << text;
 }
 
+TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) {
+  // The closed-loop Preisach case (tests/data/ambiguous_creep_loop) as a one-case suite labelled, as the
+  // generator labelled it, hysteresis: the verdict (creep) is wrong, the loop is among the ambiguous names.
+  namespace fs = std::filesystem;
+  const auto suite = temp_dir("ambiguous_suite");
+  fs::create_directories(suite / "case000");
+  for (const char* f : {"model.toml", "rec0.csv"})
+    fs::copy_file(fs::path(PVCGEL_SOURCE_DIR) / "tests/data/ambiguous_creep_loop" / f, suite / "case000" / f,
+                  fs::copy_options::overwrite_existing);
+  std::ofstream(suite / "labels.csv") << "case,effects,dominant\ncase000,hysteresis,hysteresis\n";
+  std::ostringstream log;
+  const auto r = run_directory_suite(suite.string(), 1, log);
+  const auto text = format_directory_suite(r);
+  ASSERT_EQ(r.single_cases, 1) << log.str();
+  EXPECT_EQ(r.single_correct, 0) << log.str();
+  EXPECT_EQ(r.single_ambiguous, 1) << log.str();
+  EXPECT_EQ(r.single_ambiguous_right, 0);
+  EXPECT_EQ(r.single_truth_among_ambiguous, 1);
+  EXPECT_NE(log.str().find("ambiguous with: hysteresis"), std::string::npos) << log.str();
+  EXPECT_NE(text.find("single effects answered as ambiguous: 1 (the verdict right in 0; the truth among the other names in 1)"),
+            std::string::npos) << text;
+}
+
 TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   // The first 12 cases of tests/data/independent (made by a separate Python generator,
   // tests/data/independent/generate.py, from physical descriptions only; labels in labels.csv).
@@ -444,6 +467,7 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
             r.single_correct + (r.none_cases - r.false_alarms) + r.mixture_both_named);
   // No single-effect or none case of the subset names a false second effect (measured at this level).
   EXPECT_EQ(r.false_second, 0);
+  EXPECT_LE(r.single_ambiguous_right + r.single_truth_among_ambiguous, r.single_ambiguous);
 }
 
 }  // namespace
