@@ -71,7 +71,9 @@ void plot_references(const PaperBenchResult& r, const PaperBenchOptions& o, cons
   }
 }
 
-void run_paper(const PaperArgs& a) {
+/// The bench's options from the command line: the configuration's model, rig and controller when given,
+/// then the tuning target, durations and seed. Throws when --duration does not exceed --settle by 1 s.
+PaperBenchOptions paper_options(const PaperArgs& a) {
   PaperBenchOptions o;
   if (!a.config.empty()) {
     const toml::table root = daemon::read_config_file(a.config, "--config").root;
@@ -89,66 +91,75 @@ void run_paper(const PaperArgs& a) {
   if (!(a.settle >= 0.0 && a.duration > a.settle + 1.0))
     throw std::runtime_error("--duration must exceed --settle by at least 1 s");
   o.keep_traces = !a.plot_dir.empty();
+  return o;
+}
 
-  if (a.sweep) {
-    std::cout << "Sweep over the PID tuning target (phase margin " << a.phase_margin
-              << " deg): mean |e| in um per reference and mode\n\n";
-    std::cout << " crossover |        0.1Hz            |        0.5Hz            |         1Hz             |        multi            | ranking\n";
-    std::cout << "  (rad/s)  |  pid   inv   dob   ff   |  pid   inv   dob   ff   |  pid   inv   dob   ff   |  pid   inv   dob   ff   | holds\n";
-    std::string dat = "# crossover then mean |e| for (pid inv dob ff) x (0.1Hz 0.5Hz 1Hz multi)\n";
-    for (double wc : a.sweep_values) {
-      auto so = o;
-      so.keep_traces = false;
-      so.tuning.crossover_rad_s = wc;
-      PaperBenchResult r;
-      try {
-        r = run_paper_bench(so);
-      } catch (const std::exception& e) {
-        std::printf("  %7.0f  | skipped: %s\n", wc, e.what());
-        continue;
-      }
-      std::printf("  %7.0f  ", wc);
-      dat += std::to_string(wc);
-      int holds = 0;
-      for (const auto& rr : r.references) {
-        std::printf("|");
-        for (const auto& m : rr.modes) {
-          std::printf(" %5.3f", m.errors.mean_abs_um);
-          dat += " " + std::to_string(m.errors.mean_abs_um);
-        }
-        std::printf(" ");
-        holds += paper_ranking_holds(rr);
-      }
-      dat += "\n";
-      std::printf("| %d/4\n", holds);
-      std::fflush(stdout);
-    }
-    if (!a.plot_dir.empty()) {
-      fs::create_directories(a.plot_dir);
-      const fs::path d = fs::path(a.plot_dir) / "sweep.dat";
-      write_text_file(d, dat);
-      std::string gp = "set terminal pngcairo noenhanced size 1100,800 font ',10'\nset output '" +
-                       (fs::path(a.plot_dir) / "sweep.png").string() +
-                       "'\nset multiplot layout 2,2 title 'Mean tracking error vs PID crossover target'\n"
-                       "set logscale xy\nset grid\nset xlabel 'crossover (rad/s)'\nset ylabel 'mean |e| (um)'\n";
-      const char* refs[] = {"0.1Hz", "0.5Hz", "1Hz", "multi"};
-      for (int i = 0; i < 4; ++i) {
-        gp += std::string("set title '") + refs[i] + "'\nplot ";
-        const char* names[] = {"PID", "inverse/PID", "inverse/PID/DOB", "inverse/PID/DOB/FF"};
-        for (int m = 0; m < 4; ++m)
-          gp += std::string(m ? ", " : "") + "'" + d.string() + "' u 1:" + std::to_string(2 + 4 * i + m) +
-                " w lp t '" + names[m] + "'";
-        gp += "\n";
-      }
-      gp += "unset multiplot\n";
-      const auto script = fs::path(a.plot_dir) / "sweep.gp";
-      write_text_file(script, gp);
-      run_gnuplot(script);
-      std::cout << "wrote " << (fs::path(a.plot_dir) / "sweep.png").string() << "\n";
-    }
-    return;
+/// sweep.png in `plot_dir` from the sweep's table `dat` (crossover, then mean |e| per mode and reference).
+void plot_sweep(const std::string& plot_dir, const std::string& dat) {
+  fs::create_directories(plot_dir);
+  const fs::path d = fs::path(plot_dir) / "sweep.dat";
+  write_text_file(d, dat);
+  std::string gp = "set terminal pngcairo noenhanced size 1100,800 font ',10'\nset output '" +
+                   (fs::path(plot_dir) / "sweep.png").string() +
+                   "'\nset multiplot layout 2,2 title 'Mean tracking error vs PID crossover target'\n"
+                   "set logscale xy\nset grid\nset xlabel 'crossover (rad/s)'\nset ylabel 'mean |e| (um)'\n";
+  const char* refs[] = {"0.1Hz", "0.5Hz", "1Hz", "multi"};
+  for (int i = 0; i < 4; ++i) {
+    gp += std::string("set title '") + refs[i] + "'\nplot ";
+    const char* names[] = {"PID", "inverse/PID", "inverse/PID/DOB", "inverse/PID/DOB/FF"};
+    for (int m = 0; m < 4; ++m)
+      gp += std::string(m ? ", " : "") + "'" + d.string() + "' u 1:" + std::to_string(2 + 4 * i + m) + " w lp t '" +
+            names[m] + "'";
+    gp += "\n";
   }
+  gp += "unset multiplot\n";
+  const auto script = fs::path(plot_dir) / "sweep.gp";
+  write_text_file(script, gp);
+  run_gnuplot(script);
+  std::cout << "wrote " << (fs::path(plot_dir) / "sweep.png").string() << "\n";
+}
 
+/// The mean |e| of every mode and reference at each crossover of --sweep, as a table (and a plot with
+/// --plot); a crossover no PID reaches is reported as skipped.
+void run_sweep(const PaperArgs& a, const PaperBenchOptions& o) {
+  std::cout << "Sweep over the PID tuning target (phase margin " << a.phase_margin
+            << " deg): mean |e| in um per reference and mode\n\n";
+  std::cout << " crossover |        0.1Hz            |        0.5Hz            |         1Hz             |        multi            | ranking\n";
+  std::cout << "  (rad/s)  |  pid   inv   dob   ff   |  pid   inv   dob   ff   |  pid   inv   dob   ff   |  pid   inv   dob   ff   | holds\n";
+  std::string dat = "# crossover then mean |e| for (pid inv dob ff) x (0.1Hz 0.5Hz 1Hz multi)\n";
+  for (double wc : a.sweep_values) {
+    auto so = o;
+    so.keep_traces = false;
+    so.tuning.crossover_rad_s = wc;
+    PaperBenchResult r;
+    try {
+      r = run_paper_bench(so);
+    } catch (const std::exception& e) {
+      std::printf("  %7.0f  | skipped: %s\n", wc, e.what());
+      continue;
+    }
+    std::printf("  %7.0f  ", wc);
+    dat += std::to_string(wc);
+    int holds = 0;
+    for (const auto& rr : r.references) {
+      std::printf("|");
+      for (const auto& m : rr.modes) {
+        std::printf(" %5.3f", m.errors.mean_abs_um);
+        dat += " " + std::to_string(m.errors.mean_abs_um);
+      }
+      std::printf(" ");
+      holds += paper_ranking_holds(rr);
+    }
+    dat += "\n";
+    std::printf("| %d/4\n", holds);
+    std::fflush(stdout);
+  }
+  if (!a.plot_dir.empty()) plot_sweep(a.plot_dir, dat);
+}
+
+void run_paper(const PaperArgs& a) {
+  const PaperBenchOptions o = paper_options(a);
+  if (a.sweep) return run_sweep(a, o);
   std::cout << "Running 4 references x 4 controllers, " << o.duration_s << " s each, accelerated...\n" << std::flush;
   const auto r = run_paper_bench(o);
   std::cout << format_table(r, o);
