@@ -163,80 +163,85 @@ std::vector<double> read_setpoint_csv(const std::string& path, double& period_s)
   return r;
 }
 
-void send(DdsClient& c, SendArgs a) {
-  c.connect();
-  if (a.start) ensure_running(c);
+/// The paper's references by name (Section V): y_r1 = 100 + 25 sin(2 pi f t), y_r2 the multi-harmonic sum.
+std::pair<SegmentKind, std::vector<double>> paper_reference(const std::string& name) {
+  if (name == "0.1Hz" || name == "0.5Hz" || name == "1Hz") return {SegmentKind::sine, {100.0, 25.0, std::stod(name), 0.0}};
+  if (name == "multi") return {SegmentKind::multisine, {96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0}};
+  throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + name + "'");
+}
+
+/// The segment of `send KIND VALUES...` (every kind but csv): its kind and values, a sine's phase
+/// defaulted to 0, a multiharmonic's pairs expanded with phases 0. Throws naming the form expected.
+std::pair<SegmentKind, std::vector<double>> segment_of(const SendArgs& a) {
   std::vector<double> v = a.values;
   const auto need = [&](std::size_t n, const char* form) {
     if (v.size() != n) throw std::runtime_error("send " + a.kind + " takes " + form);
   };
-  SegmentKind kind = SegmentKind::hold;
   if (a.kind == "hold") {
     need(1, "LEVEL");
-  } else if (a.kind == "ramp") {
+    return {SegmentKind::hold, v};
+  }
+  if (a.kind == "ramp") {
     need(2, "FROM TO (and --duration S)");
-    kind = SegmentKind::ramp;
-  } else if (a.kind == "sine") {
+    return {SegmentKind::ramp, v};
+  }
+  if (a.kind == "sine") {
     if (v.size() == 3) v.push_back(0.0);
     need(4, "OFFSET AMPLITUDE FREQ_HZ [PHASE_RAD]");
-    kind = SegmentKind::sine;
-  } else if (a.kind == "multiharmonic") {
-    // OFFSET A1 F1 A2 F2 ...: phases 0.
+    return {SegmentKind::sine, v};
+  }
+  if (a.kind == "multiharmonic") {
     if (v.size() < 3 || v.size() % 2 == 0) throw std::runtime_error("send multiharmonic takes OFFSET A1 F1 [A2 F2 ...]");
     std::vector<double> w{v[0]};
     for (std::size_t i = 1; i + 1 < v.size(); i += 2) w.insert(w.end(), {v[i], v[i + 1], 0.0});
-    v = w;
-    kind = SegmentKind::multisine;
-  } else if (a.kind == "paper") {
-    // The paper's references (Section V): y_r1 = 100 + 25 sin(2 pi f t), y_r2 the multi-harmonic sum.
-    if (a.csv == "0.1Hz" || a.csv == "0.5Hz" || a.csv == "1Hz") {
-      v = {100.0, 25.0, std::stod(a.csv), 0.0};
-      kind = SegmentKind::sine;
-    } else if (a.csv == "multi") {
-      v = {96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0};
-      kind = SegmentKind::multisine;
-    } else {
-      throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + a.csv + "'");
-    }
-  } else if (a.kind == "csv") {
-    double period = 0.0;
-    const std::vector<double> all = read_setpoint_csv(a.csv, period);
-    const double loop_period = c.status().period_s;
-    if (period < loop_period * 0.999)
-      throw std::runtime_error(a.csv + ": sample period " + format("%g", period) + " s is shorter than the loop's " +
-                               format("%g", loop_period) + " s");
-    constexpr std::size_t kChunk = 1024;
-    std::size_t sent = 0;
-    bool first = true;
-    while (sent < all.size() && !g_interrupted) {
-      std::vector<double> chunk(all.begin() + static_cast<std::ptrdiff_t>(sent),
-                                all.begin() + static_cast<std::ptrdiff_t>(std::min(all.size(), sent + kChunk)));
-      SendArgs piece = a;
-      piece.append = !first || a.append;
-      piece.blend_s = first ? a.blend_s : 0.0;
-      piece.at_s = first ? a.at_s : -1.0;
-      auto t = make_trajectory(piece, SegmentKind::samples, chunk);
-      t.period_s = period;
-      const Reply r = c.send(t, false);
-      if (r.reason == daemon::RejectReason::busy) {
-        // Back-pressure: the daemon holds max_lead_s of setpoints; wait for it to play some.
-        std::this_thread::sleep_for(std::chrono::milliseconds(200));
-        continue;
-      }
-      if (!r.accepted)
-        throw Rejected("trajectory chunk " + std::to_string(sent / kChunk + 1) + " rejected by rig '" + c.options().rig +
-                           "': " + std::string(daemon::to_string(r.reason)) + ": " + r.detail,
-                       r);
-      sent += chunk.size();
-      first = false;
-      std::fprintf(stderr, "\rpvcgel send: %zu / %zu samples queued", sent, all.size());
-    }
-    std::fprintf(stderr, "\n");
-    return;
-  } else {
-    throw std::runtime_error("unknown trajectory kind '" + a.kind + "'");
+    return {SegmentKind::multisine, w};
   }
-  auto t = make_trajectory(a, kind, v);
+  if (a.kind == "paper") return paper_reference(a.csv);
+  throw std::runtime_error("unknown trajectory kind '" + a.kind + "'");
+}
+
+/// `send csv FILE`: the samples in chunks of 1024, the first blended (and timed) as asked, the rest
+/// appended; a busy daemon (it already holds max_lead_s of setpoints) is waited for, a refusal ends it.
+void send_csv(DdsClient& c, const SendArgs& a) {
+  double period = 0.0;
+  const std::vector<double> all = read_setpoint_csv(a.csv, period);
+  const double loop_period = c.status().period_s;
+  if (period < loop_period * 0.999)
+    throw std::runtime_error(a.csv + ": sample period " + format("%g", period) + " s is shorter than the loop's " +
+                             format("%g", loop_period) + " s");
+  constexpr std::size_t kChunk = 1024;
+  std::size_t sent = 0;
+  while (sent < all.size() && !g_interrupted) {
+    const bool first = sent == 0;
+    std::vector<double> chunk(all.begin() + static_cast<std::ptrdiff_t>(sent),
+                              all.begin() + static_cast<std::ptrdiff_t>(std::min(all.size(), sent + kChunk)));
+    SendArgs piece = a;
+    piece.append = !first || a.append;
+    piece.blend_s = first ? a.blend_s : 0.0;
+    piece.at_s = first ? a.at_s : -1.0;
+    auto t = make_trajectory(piece, SegmentKind::samples, chunk);
+    t.period_s = period;
+    const Reply r = c.send(t, false);
+    if (r.reason == daemon::RejectReason::busy) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      continue;
+    }
+    if (!r.accepted)
+      throw Rejected("trajectory chunk " + std::to_string(sent / kChunk + 1) + " rejected by rig '" + c.options().rig +
+                         "': " + std::string(daemon::to_string(r.reason)) + ": " + r.detail,
+                     r);
+    sent += chunk.size();
+    std::fprintf(stderr, "\rpvcgel send: %zu / %zu samples queued", sent, all.size());
+  }
+  std::fprintf(stderr, "\n");
+}
+
+void send(DdsClient& c, const SendArgs& a) {
+  c.connect();
+  if (a.start) ensure_running(c);
+  if (a.kind == "csv") return send_csv(c, a);
+  auto [kind, values] = segment_of(a);  // the wire trajectory borrows the values
+  auto t = make_trajectory(a, kind, values);
   c.send(t);
   std::printf("rig %s: %s accepted\n", c.options().rig.c_str(), a.kind.c_str());
 }
@@ -415,6 +420,12 @@ void add_send_command(CLI::App& app) {
         a.values.push_back(x);
       }
     }
+    // A segment that does not fit its kind is a command-line mistake, reported before any rig is reached.
+    if (a.kind != "csv") try {
+        (void)segment_of(a);
+      } catch (const std::runtime_error& e) {
+        throw CLI::ValidationError("VALUES", e.what());
+      }
     run_client([&] {
       DdsClient c(*opt);
       send(c, a);

@@ -238,6 +238,14 @@ TEST(PvcgelExitCodes, TheSameMistakeGivesTheSameCodeInEverySubcommand) {
     const auto r = run_program(kClient, args);
     EXPECT_EQ(r.exit_code, 64) << r.err;
   }
+  // A segment that does not fit its kind is a usage error, named before any rig is reached (no DDS starts).
+  for (const auto& [args, message] :
+       {std::pair<std::vector<std::string>, std::string>{{"send", "sine", "1", "2"}, "send sine takes OFFSET AMPLITUDE FREQ_HZ [PHASE_RAD]"},
+        std::pair<std::vector<std::string>, std::string>{{"send", "paper", "2Hz"}, "send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '2Hz'"}}) {
+    const auto r = run_program(kClient, args);
+    EXPECT_EQ(r.exit_code, 64) << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+  }
   const auto help = run_program(kClient, {"--help"});
   EXPECT_EQ(help.exit_code, 0);
   EXPECT_NE(help.out.find("Exit codes (every subcommand)"), std::string::npos) << help.out;
