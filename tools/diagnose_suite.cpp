@@ -251,70 +251,83 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
 
 }  // namespace
 
+namespace {
+
+/// One case's line: the truth, the verdict and mixture, the score, the held-out ratio, the time, the
+/// leading candidates and the marks (widened, refit at bound, withheld second, ambiguous, error).
+std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
+  char line[1024];
+  std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s\n",
+                c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
+                scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.widened ? "  widened" : "",
+                o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
+                o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(),
+                o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), o.error.empty() ? "" : "  error: ",
+                o.error.c_str());
+  return line;
+}
+
+/// Adds a single-effect or none case to the confusion matrix and its scores.
+void tally_single(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
+  ++r.confusion[static_cast<size_t>(label_index(c.effects))][static_cast<size_t>(label_index(o.verdict))];
+  if (c.effects == "none") {
+    ++r.none_cases;
+    r.false_alarms += o.verdict != "none";
+    return;
+  }
+  ++r.single_cases;
+  if (!o.ambiguous.empty()) {
+    ++r.single_ambiguous;
+    r.single_ambiguous_right += o.verdict == c.effects;
+    r.single_truth_among_ambiguous += o.verdict != c.effects && lists(o.ambiguous, c.effects);
+  }
+  if (o.verdict == c.effects) {
+    ++r.single_correct;
+    r.ratios.push_back(o.ratio);
+    r.ratios_aligned.push_back(o.ratio_aligned);
+  }
+}
+
+/// Adds one case to the scores.
+void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
+  ++r.cases;
+  r.failed += o.verdict == "error";
+  r.max_case_s = std::max(r.max_case_s, o.seconds);
+  r.refit_at_bound += !o.at_bounds.empty();
+  r.widened += o.widened;
+  r.widened_right += o.widened && scored_right(c, o);
+  (o.at_bounds.empty() ? r.refit_inside_right : r.refit_at_bound_right) += scored_right(c, o);
+  const bool single_label = c.effects.find('+') == std::string::npos;
+  r.false_second += single_label && o.mixture.find('+') != std::string::npos;
+  r.withheld += !o.withheld.empty();
+  r.withheld_true += !o.withheld.empty() && lists(c.effects, o.withheld);
+  if (single_label) return tally_single(r, c, o);
+  ++r.mixture_cases;
+  r.mixture_both_named += names_both(o.mixture, c.effects);
+  r.mixture_dominant_correct += o.verdict == c.dominant;
+  if (o.verdict == c.dominant) r.ratios.push_back(o.ratio), r.ratios_aligned.push_back(o.ratio_aligned);
+}
+
+}  // namespace
+
 DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit) {
   namespace fs = std::filesystem;
   auto cases = read_labels(fs::path(dir) / "labels.csv");
   if (limit > 0 && static_cast<size_t>(limit) < cases.size()) cases.resize(static_cast<size_t>(limit));
   std::vector<CaseOutcome> out(cases.size());
   std::mutex log_mutex;
-  DirectorySuiteResult r;
-  double time_sum = 0.0;
   const int threads = threads_per_job(jobs);  // each case's fits share the cores the other jobs leave
   parallel_for(cases.size(), jobs, [&](size_t i) {
     out[i] = run_case(fs::path(dir) / cases[i].name, threads);
-    const auto& c = cases[i];
-    const auto& o = out[i];
-    char line[960];
-    std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s\n",
-                  c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
-                  scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(),
-                  o.widened ? "  widened" : "", o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
-                  o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(),
-                  o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), o.error.empty() ? "" : "  error: ",
-                  o.error.c_str());
+    const std::string line = case_line(cases[i], out[i]);
     const std::lock_guard lock(log_mutex);
     log << line << std::flush;
   });
+  DirectorySuiteResult r;
+  double time_sum = 0.0;
   for (size_t i = 0; i < cases.size(); ++i) {
-    const auto& c = cases[i];
-    const auto& o = out[i];
-    ++r.cases;
-    r.failed += o.verdict == "error";
-    r.max_case_s = std::max(r.max_case_s, o.seconds);
-    time_sum += o.seconds;
-    r.refit_at_bound += !o.at_bounds.empty();
-    r.widened += o.widened;
-    r.widened_right += o.widened && scored_right(c, o);
-    (o.at_bounds.empty() ? r.refit_inside_right : r.refit_at_bound_right) += scored_right(c, o);
-    const bool single_label = c.effects.find('+') == std::string::npos;
-    r.false_second += single_label && o.mixture.find('+') != std::string::npos;
-    r.withheld += !o.withheld.empty();
-    r.withheld_true += !o.withheld.empty() && lists(c.effects, o.withheld);
-    if (!single_label) {
-      ++r.mixture_cases;
-      r.mixture_both_named += names_both(o.mixture, c.effects);
-      r.mixture_dominant_correct += o.verdict == c.dominant;
-      if (o.verdict == c.dominant) r.ratios.push_back(o.ratio), r.ratios_aligned.push_back(o.ratio_aligned);
-      continue;
-    }
-    const int truth = label_index(c.effects), verdict = label_index(o.verdict);
-    ++r.confusion[static_cast<size_t>(truth)][static_cast<size_t>(verdict)];
-    if (c.effects == "none") {
-      ++r.none_cases;
-      r.false_alarms += o.verdict != "none";
-    } else {
-      ++r.single_cases;
-      if (!o.ambiguous.empty()) {
-        ++r.single_ambiguous;
-        r.single_ambiguous_right += o.verdict == c.effects;
-        r.single_truth_among_ambiguous += o.verdict != c.effects && lists(o.ambiguous, c.effects);
-      }
-      if (o.verdict == c.effects) {
-        ++r.single_correct;
-        r.ratios.push_back(o.ratio);
-        r.ratios_aligned.push_back(o.ratio_aligned);
-      }
-    }
+    tally(r, cases[i], out[i]);
+    time_sum += out[i].seconds;
   }
   r.mean_case_s = r.cases ? time_sum / r.cases : 0.0;
   return r;
