@@ -848,16 +848,10 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
   return refined;
 }
 
-/// Alignment: the rest voltage each recording starts from (u[0] or the one its
-/// first samples imply, whichever the nominal model fits better), then the I/O
-/// delay (whole samples, refined sub-sample by a parabola through the fit
-/// error when it has a clear minimum). Leaves `p` set to what the analysis uses.
-Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const DiagnosisOptions& o) {
-  Alignment a;
-  if (o.io_delay_declared) a.declared = o.io_delay_samples;
-  p.set_delay(o.io_delay_samples);
-  // Initial state: try both starts per recording (the modes absorb the rest of G's transient).
-  std::vector<double> from_y = p.initial(), at_u0;
+/// The rest voltage each recording starts from: u[0], or the one its first samples imply, whichever the
+/// nominal model fits better (the modes absorb the rest of G's transient). Leaves `p` set to it.
+void choose_start_states(Problem& p, const std::vector<Series>& data) {
+  std::vector<double> at_u0;
   for (const auto& s : data) at_u0.push_back(s.u_V.front());
   p.set_initial(at_u0);
   const auto pa = p.predict({}, 1.0, true, false);
@@ -871,43 +865,57 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
     chosen.push_back(ea <= eb ? data[r].u_V.front() : NAN);
   }
   p.set_initial(chosen);
-  // Delay: search 0..max (an undeclared delay) or 0..declared + 2 (to check the file), jointly with the
-  // nuisance refit of the nominal model at every delay: a G a few percent too slow or too fast looks
-  // like a sample of delay, and a delay estimated without the refit leaves that sample to be blamed on
-  // a `delay` effect later.
-  const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
+}
+
+/// The I/O delay that fits best over 0..max_d samples, jointly with the nuisance refit of the nominal model
+/// at every delay (a G a few percent too slow or too fast looks like a sample of delay, and a delay
+/// estimated without the refit leaves that sample to be blamed on a `delay` effect later), refined
+/// sub-sample by a parabola through the fit error when it has a clearly curved minimum.
+double search_delay(Problem& p, int max_d, const DiagnosisOptions& o) {
   std::vector<double> mse(static_cast<size_t>(max_d) + 1);
   run_each("delay search", mse.size(), p, o, [&](size_t d, Problem& own) {
     own.set_delay(static_cast<double>(d));
     mse[d] = fit_mse(own, {}, refit_nominal(own, o));
   });
-  const auto best = static_cast<int>(std::min_element(mse.begin(), mse.end()) - mse.begin());
-  a.io_delay_samples = best;
-  if (best > 0 && best < max_d) {
-    const double m0 = mse[static_cast<size_t>(best) - 1], m1 = mse[static_cast<size_t>(best)], m2 = mse[static_cast<size_t>(best) + 1];
-    const double curv = m0 - 2.0 * m1 + m2;
-    // Sub-sample only when the minimum is clearly curved (not flat within the noise of the MSE).
-    if (curv > 1e-3 * m1) a.io_delay_samples = best + std::clamp(0.5 * (m0 - m2) / curv, -0.5, 0.5);
-  }
+  const auto best = static_cast<size_t>(std::min_element(mse.begin(), mse.end()) - mse.begin());
+  if (best == 0 || best == mse.size() - 1) return static_cast<double>(best);
+  const double m0 = mse[best - 1], m1 = mse[best], m2 = mse[best + 1];
+  const double curv = m0 - 2.0 * m1 + m2;
+  if (!(curv > 1e-3 * m1)) return static_cast<double>(best);  // flat within the noise of the MSE
+  return static_cast<double>(best) + std::clamp(0.5 * (m0 - m2) / curv, -0.5, 0.5);
+}
+
+/// What the alignment says about the model file's delay: a contradiction of the declared value, or the
+/// estimate the analysis uses when the file is silent.
+std::string alignment_note(const Alignment& a, int max_d) {
+  if (!a.declared)
+    return "the model file does not declare io_delay_samples: estimated " + fmt("%.2g", a.io_delay_samples) +
+           " samples from the data (searched 0.." + std::to_string(max_d) + "); " + fmt("%.0f", a.used_samples) + " used";
+  if (std::abs(a.io_delay_samples - *a.declared) < 0.5) return "";
+  const std::string note = "the model file declares io_delay_samples = " + std::to_string(*a.declared) +
+                           ", but the data fit best with " + fmt("%.2g", a.io_delay_samples) + " samples";
+  // Less delay than declared cannot be an effect, but the nominal model alone is drawn below the true
+  // delay by a mode's fast path or a creep: the analysis starts at the declared delay, and the leading
+  // candidates move it to the estimate only when they fit clearly better there (`leading_delay`).
+  if (a.io_delay_samples < *a.declared)
+    return note + " (less than declared: the analysis starts at the declared delay and checks the estimate with "
+                  "the leading candidates)";
+  return note + " (the excess is judged as a delay effect)";
+}
+
+/// Alignment: the start states (choose_start_states), then the I/O delay over 0..max (an undeclared delay)
+/// or 0..declared + 2 (to check the file). Leaves `p` set to what the analysis uses.
+Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const DiagnosisOptions& o) {
+  Alignment a;
+  if (o.io_delay_declared) a.declared = o.io_delay_samples;
+  p.set_delay(o.io_delay_samples);
+  choose_start_states(p, data);
+  const int max_d = o.io_delay_declared ? std::min(o.io_delay_samples + 2, 8) : o.max_undeclared_delay_samples;
+  a.io_delay_samples = search_delay(p, max_d, o);
   // The analysis runs with whole samples (what a model file and the daemon can hold); the sub-sample
   // estimate is reported, and a remainder of half a sample or more rounds up.
   a.used_samples = o.io_delay_declared ? o.io_delay_samples : std::round(a.io_delay_samples);
-  if (a.declared && std::abs(a.io_delay_samples - *a.declared) >= 0.5) {
-    a.note = "the model file declares io_delay_samples = " + std::to_string(*a.declared) + ", but the data fit best with " +
-             fmt("%.2g", a.io_delay_samples) + " samples";
-    if (a.io_delay_samples < *a.declared) {
-      // Less delay than declared cannot be an effect, but the nominal model alone is drawn below the true
-      // delay by a mode's fast path or a creep: the analysis starts at the declared delay, and the leading
-      // candidates move it to the estimate only when they fit clearly better there (`leading_delay`).
-      a.note += " (less than declared: the analysis starts at the declared delay and checks the estimate with "
-                "the leading candidates)";
-    } else {
-      a.note += " (the excess is judged as a delay effect)";
-    }
-  } else if (!a.declared) {
-    a.note = "the model file does not declare io_delay_samples: estimated " + fmt("%.2g", a.io_delay_samples) +
-             " samples from the data (searched 0.." + std::to_string(max_d) + "); " + fmt("%.0f", a.used_samples) + " used";
-  }
+  a.note = alignment_note(a, max_d);
   p.set_delay(a.used_samples);
   a.initial_V = p.initial();
   return a;
