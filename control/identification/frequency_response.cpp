@@ -43,13 +43,14 @@ std::complex<double> phasor(const Eigen::VectorXd& coef, int lead, int k) {
 
 double FrequencyResponsePoint::omega_rad_s() const noexcept { return 2.0 * kPi * frequency_Hz; }
 
-SineEstimate estimate_sine(const std::vector<double>& t, const std::vector<double>& u, size_t b, size_t e) {
-  SineEstimate s;
-  if (e <= b + 8 || e > u.size() || e > t.size()) return s;
+namespace {
+
+/// The frequency (rad/s) from upward crossings of the mid level over [b, e), with hysteresis (noise near
+/// the mid level cannot double count); NaN without two crossings or with a flat signal.
+double crossing_frequency(const std::vector<double>& t, const std::vector<double>& u, size_t b, size_t e) {
   const auto [mn, mx] = std::minmax_element(u.begin() + static_cast<long>(b), u.begin() + static_cast<long>(e));
   const double mid = 0.5 * (*mn + *mx), band = 0.25 * (*mx - *mn);
-  if (!(band > 0.0)) return s;
-  // Upward crossings of the mid level with hysteresis (noise near mid cannot double count).
+  if (!(band > 0.0)) return NAN;
   std::vector<double> crossings;
   bool armed = false;
   for (size_t k = b + 1; k < e; ++k) {
@@ -60,26 +61,21 @@ SineEstimate estimate_sine(const std::vector<double>& t, const std::vector<doubl
       armed = false;
     }
   }
-  if (crossings.size() < 2) return s;
-  double omega = 2.0 * kPi * static_cast<double>(crossings.size() - 1) / (crossings.back() - crossings.front());
+  if (crossings.size() < 2) return NAN;
+  return 2.0 * kPi * static_cast<double>(crossings.size() - 1) / (crossings.back() - crossings.front());
+}
 
-  const double t_c = 0.5 * (t[b] + t[e - 1]);
-  const auto n = static_cast<Eigen::Index>(e - b);
-  Eigen::VectorXd uu(n), tau(n);
-  for (Eigen::Index r = 0; r < n; ++r) {
-    uu(r) = u[b + static_cast<size_t>(r)];
-    tau(r) = t[b + static_cast<size_t>(r)] - t_c;
-  }
-  // Linear start at the coarse frequency, then Gauss-Newton on (B, a, b, omega).
+/// B + a cos(w tau) + b sin(w tau) fitted to uu: linear at the coarse `omega`, then Gauss-Newton on
+/// (B, a, b, w). Returns (B, a, b, w).
+Eigen::Vector4d fit_sine(const Eigen::VectorXd& tau, const Eigen::VectorXd& uu, double omega) {
+  const auto n = tau.size();
   Eigen::Vector4d p;
-  {
-    Eigen::MatrixXd X(n, 3);
-    X.col(0).setOnes();
-    X.col(1) = (omega * tau).array().cos();
-    X.col(2) = (omega * tau).array().sin();
-    p.head<3>() = X.colPivHouseholderQr().solve(uu);
-    p(3) = omega;
-  }
+  Eigen::MatrixXd X(n, 3);
+  X.col(0).setOnes();
+  X.col(1) = (omega * tau).array().cos();
+  X.col(2) = (omega * tau).array().sin();
+  p.head<3>() = X.colPivHouseholderQr().solve(uu);
+  p(3) = omega;
   Eigen::MatrixXd J(n, 4);
   Eigen::VectorXd r(n);
   for (int it = 0; it < 20; ++it) {
@@ -93,8 +89,26 @@ SineEstimate estimate_sine(const std::vector<double>& t, const std::vector<doubl
     p += d;
     if (std::abs(d(3)) <= 1e-13 * std::abs(p(3))) break;
   }
+  return p;
+}
+
+}  // namespace
+
+SineEstimate estimate_sine(const std::vector<double>& t, const std::vector<double>& u, size_t b, size_t e) {
+  SineEstimate s;
+  if (e <= b + 8 || e > u.size() || e > t.size()) return s;
+  const double omega = crossing_frequency(t, u, b, e);
+  if (std::isnan(omega)) return s;
+  const double t_c = 0.5 * (t[b] + t[e - 1]);
+  const auto n = static_cast<Eigen::Index>(e - b);
+  Eigen::VectorXd uu(n), tau(n);
+  for (Eigen::Index r = 0; r < n; ++r) {
+    uu(r) = u[b + static_cast<size_t>(r)];
+    tau(r) = t[b + static_cast<size_t>(r)] - t_c;
+  }
+  const Eigen::Vector4d p = fit_sine(tau, uu, omega);
   const Eigen::ArrayXd c = (p(3) * tau).array().cos(), sn = (p(3) * tau).array().sin();
-  r = uu.array() - (p(0) + p(1) * c + p(2) * sn);
+  const Eigen::VectorXd r = uu.array() - (p(0) + p(1) * c + p(2) * sn);
   s.bias_V = p(0);
   s.amplitude_V = std::hypot(p(1), p(2));
   s.frequency_Hz = std::abs(p(3)) / (2.0 * kPi);
