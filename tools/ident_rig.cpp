@@ -111,31 +111,63 @@ std::string fmt_point(const SinePoint& p) {
 
 }  // namespace
 
-std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const fs::path& dir) {
-  DdsClient c(rig, true, true);
+namespace {
+
+/// Connects for lossless telemetry and refuses a rig in FAULT; returns the loop period (s).
+double connect_for_ident(DdsClient& c, const ClientOptions& rig) {
   try {
     c.connect();
   } catch (const std::runtime_error& e) {
     throw std::runtime_error(std::string(e.what()) +
                              " (identification records lossless telemetry: the daemon needs [dds] reliable_telemetry = true)");
   }
-  const double Ts = c.status().period_s;
   if (rig_state(c) == LoopState::fault)
-    throw std::runtime_error("rig '" + rig.rig + "' is in FAULT (" +
-                             std::string(daemon::to_string(fault_of(c.status()))) +
+    throw std::runtime_error("rig '" + rig.rig + "' is in FAULT (" + std::string(daemon::to_string(fault_of(c.status()))) +
                              "): clear it with `pvcgel reset` first");
-  const auto plan = ExcitationPlan::from_grid(a.grid, Ts);
+  return c.status().period_s;
+}
+
+/// The held-out sines: the validation amplitude and bias at each validation frequency, 10 s or the
+/// plan's fewest periods, whichever is longer (their voltages checked like the plan's).
+std::vector<SinePoint> validation_points(const IdentArgs& a, double Ts) {
   std::vector<SinePoint> validation;
   for (double f : a.validation_frequencies_Hz)
     validation.push_back({a.validation_amplitude_V, a.validation_bias_V, f, a.grid.settle_s,
                           std::max(ExcitationPlan::kMinPeriods, static_cast<int>(std::ceil(10.0 * f)))});
   (void)ExcitationPlan(validation, Ts);  // checks the voltage range
+  return validation;
+}
+
+/// Runs one sine experiment and writes its recording into `into` (named by the point).
+SineRecord record_point(DdsClient& c, const SinePoint& p, double Ts, const ClientOptions& rig, const fs::path& into) {
+  SineRecord r;
+  try {
+    r = run_point(c, p, Ts);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("experiment " + fmt_point(p) + ": " + e.what());
+  }
+  char trajectory[96], settle[32], rate[32];
+  std::snprintf(trajectory, sizeof trajectory, "ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz);
+  std::snprintf(settle, sizeof settle, "%g", p.settle_s);
+  std::snprintf(rate, sizeof rate, "%.0f", 1.0 / Ts);
+  write_sine_recording(into / (fmt_point(p) + ".csv"), r,
+                       {{"rate_hz", rate}, {"hal_backend", c.status().hal_backend}, {"rig_id", rig.rig},
+                        {"trajectory", trajectory}, {"mode", "open_loop"}, {"settle_s", settle}});
+  return r;
+}
+
+}  // namespace
+
+std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const fs::path& dir) {
+  DdsClient c(rig, true, true);
+  const double Ts = connect_for_ident(c, rig);
+  const auto plan = ExcitationPlan::from_grid(a.grid, Ts);
+  const std::vector<SinePoint> validation = validation_points(a, Ts);
   double total_s = 0;
   for (const auto& p : plan.points()) total_s += p.duration_s();
   for (const auto& p : validation) total_s += p.duration_s();
   std::fprintf(stderr, "pvcgel ident: %zu + %zu sine experiments on rig '%s', about %.0f s\n", plan.points().size(),
                validation.size(), rig.rig.c_str(), total_s);
-
   leave_safe(c);
   c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::voltage));
   try {
@@ -144,29 +176,12 @@ std::string run_plan_on_rig(const IdentArgs& a, const ClientOptions& rig, const 
     wait_for_state(c, LoopState::running, 5.0);
     std::size_t i = 0;
     const std::size_t n = plan.points().size() + validation.size();
-    const auto run_all = [&](const std::vector<SinePoint>& points, const fs::path& into) {
-      for (const auto& p : points) {
-        ++i;
-        SineRecord r;
-        try {
-          r = run_point(c, p, Ts);
-        } catch (const std::runtime_error& e) {
-          throw std::runtime_error("experiment " + fmt_point(p) + ": " + e.what());
-        }
-        char trajectory[96];
-        std::snprintf(trajectory, sizeof trajectory, "ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz);
-        char settle[32], rate[32];
-        std::snprintf(settle, sizeof settle, "%g", p.settle_s);
-        std::snprintf(rate, sizeof rate, "%.0f", 1.0 / Ts);
-        write_sine_recording(into / (fmt_point(p) + ".csv"), r,
-                             {{"rate_hz", rate}, {"hal_backend", c.status().hal_backend}, {"rig_id", rig.rig},
-                              {"trajectory", trajectory}, {"mode", "open_loop"}, {"settle_s", settle}});
-        std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s recorded\n", i, n, p.amplitude_V,
+    for (const auto& [points, into] : {std::pair{&plan.points(), dir}, std::pair{&validation, dir / "validation"}})
+      for (const auto& p : *points) {
+        const SineRecord r = record_point(c, p, Ts, rig, into);
+        std::fprintf(stderr, "[%zu/%zu] A = %.0f V, B = %.0f V, f = %.3f Hz: %.1f s recorded\n", ++i, n, p.amplitude_V,
                      p.bias_V, p.frequency_Hz, static_cast<double>(r.t_s.size()) * Ts);
       }
-    };
-    run_all(plan.points(), dir);
-    run_all(validation, dir / "validation");
   } catch (...) {
     leave_safe(c);  // 0 V and high voltage off before anything else is reported
     throw;
