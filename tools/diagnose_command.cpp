@@ -474,11 +474,7 @@ std::function<void(std::string_view, std::size_t, std::size_t)> progress_printer
   };
 }
 
-/// The recordings, checked against the model (a bad one names its file), and the rows each skipped.
-struct LoadedRecordings {
-  std::vector<Series> data;
-  std::vector<long> skipped;
-};
+}  // namespace
 
 LoadedRecordings load_recordings(const DiagnoseArgs& a, const LoadedModel& lm) {
   LoadedRecordings out;
@@ -512,6 +508,8 @@ DiagnosisOptions diagnosis_options(const DiagnoseArgs& a, const LoadedModel& lm)
   if (a.progress) opt.progress = progress_printer();
   return opt;
 }
+
+namespace {
 
 /// What the command prints: the verdict, alignment, nominal refit, errors, mismatch windows, candidates.
 std::string summary_text(const DiagnosisResult& r, const DiagnoseArgs& a, const std::vector<long>& skipped, double cpu) {

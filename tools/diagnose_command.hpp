@@ -59,6 +59,19 @@ std::string augmented_model_toml(const LoadedModel& model, const control::diagno
 std::string diagnosis_json(const control::diagnosis::DiagnosisResult& result, const std::vector<std::string>& recordings,
                            const std::vector<long>& skipped_rows, double cpu_s);
 
+/// The recordings, checked against the model (a bad one names its file), and the rows each skipped.
+struct LoadedRecordings {
+  std::vector<control::diagnosis::Series> data;
+  std::vector<long> skipped;
+};
+
+/// Reads args.recordings. @throws std::runtime_error "PATH: reason" for a bad recording.
+LoadedRecordings load_recordings(const DiagnoseArgs& args, const LoadedModel& model);
+
+/// The diagnosis options the command runs with: the model file's I/O delay and controller range, the
+/// threads and progress of `args`.
+control::diagnosis::DiagnosisOptions diagnosis_options(const DiagnoseArgs& args, const LoadedModel& model);
+
 /// What run_diagnose produced (for tests).
 struct DiagnoseOutcome {
   control::diagnosis::DiagnosisResult result;

@@ -1386,11 +1386,11 @@ std::vector<Effect> second_effect_starts(const CandidateResult& a, Problem& prob
   return out;
 }
 
-/// A pair to fit jointly: the leader and the second effect, and, for a
-/// second effect from the forward selection that was also fitted alone, its grid point in the leader's
-/// residual (a start of its own: a mode fitted alone at the wrong frequency sits far from the pair's).
+/// A second effect to fit jointly with the leader (res.candidates.front()) and, for one from the forward
+/// selection that was also fitted alone, its grid point in the leader's residual (a start of its own: a
+/// mode fitted alone at the wrong frequency sits far from the pair's).
 struct PairPlan {
-  Effect lead, second;
+  Effect second;
   std::optional<Effect> grid_second;
 };
 
@@ -1408,7 +1408,7 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
   const auto add = [&](const Effect& b, std::optional<Effect> grid) {
     if (std::any_of(out.begin(), out.end(), [&](const PairPlan& p) { return p.second.kind == b.kind; })) return true;
     if (!can_run_together(a.effect, b)) return false;
-    out.push_back({a.effect, b, grid});
+    out.push_back({b, grid});
     return true;
   };
   // A kind fitted on its own starts from that fit too: the grid start alone of a loop beside a creep
@@ -1436,12 +1436,12 @@ Eigen::VectorXd pair_start(size_t start, const PairPlan& plan, const DiagnosisRe
                            const FitSpace& space, const std::vector<Series>& data, const DataScale& scale,
                            const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
-  if (start == 0) return space.z_of({plan.lead, plan.second}, nominal_of(a));
-  if (start == 2) return space.z_of({plan.lead, *plan.grid_second}, nominal_of(a));
+  if (start == 0) return space.z_of({a.effect, plan.second}, nominal_of(a));
+  if (start == 2) return space.z_of({a.effect, *plan.grid_second}, nominal_of(a));
   const auto* fitted_b = fitted_candidate(res, plan.second.kind);
   const Nominal kb = fitted_b ? nominal_of(*fitted_b) : Nominal{};
-  FitSpace lead({plan.lead.kind}, scale, false, o, &data);
-  if (const auto i = form_choice(plan.lead.kind)) lead.hold(plan.lead.kind, *i, plan.lead.p[*i]);
+  FitSpace lead({a.effect.kind}, scale, false, o, &data);
+  if (const auto i = form_choice(a.effect.kind)) lead.hold(a.effect.kind, *i, a.effect.p[*i]);
   const auto regrid = coarse_grid(lead, [&](const Effect& x) {
     const std::vector<Effect> e{x, plan.second};
     return problem.residual(e, kb).squaredNorm();
@@ -1453,12 +1453,13 @@ Eigen::VectorXd pair_start(size_t start, const PairPlan& plan, const DiagnosisRe
 /// start) a task of its own; each pair keeps its best start (the first on a tie).
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o) {
+  const Effect& leader = res.candidates.front().effect;
   const auto plans = pair_plans(res, problem, data, scale, o);
   std::vector<FitSpace> spaces;
   std::vector<std::pair<size_t, size_t>> tasks;  // (plan, start)
   for (size_t i = 0; i < plans.size(); ++i) {
-    spaces.emplace_back(std::vector<EffectKind>{plans[i].lead.kind, plans[i].second.kind}, scale, true, o, &data);
-    for (const Effect& e : {plans[i].lead, plans[i].second})  // the form its own fit chose
+    spaces.emplace_back(std::vector<EffectKind>{leader.kind, plans[i].second.kind}, scale, true, o, &data);
+    for (const Effect& e : {leader, plans[i].second})  // the form its own fit chose
       if (const auto f = form_choice(e.kind)) spaces.back().hold(e.kind, *f, e.p[*f]);
     for (size_t s = 0; s < pair_starts(plans[i]); ++s) tasks.emplace_back(i, s);
   }

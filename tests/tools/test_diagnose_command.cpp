@@ -252,23 +252,21 @@ DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vec
   return run_diagnose(a);
 }
 
-/// One recording and its model file, loaded for control::diagnosis::diagnose directly (options the
-/// command line does not expose), with the model file's I/O delay in the options.
+/// A model file and its recordings loaded as `pvcgel diagnose` loads them, with its options, for
+/// control::diagnosis::diagnose directly (options the command line does not expose).
 struct LibraryCase {
   LoadedModel model;
-  control::diagnosis::Series series;
+  std::vector<control::diagnosis::Series> series;
   control::diagnosis::DiagnosisOptions options;
 };
 
 LibraryCase load_library_case(const std::string& model_path, const std::string& csv_path) {
+  DiagnoseArgs a;
+  a.model = model_path;
+  a.recordings = {csv_path};
   LibraryCase c{load_model(model_path), {}, {}};
-  const Recording rec = read_recording(csv_path);
-  c.series.t_s = rec.col("t_s");
-  c.series.u_V = rec.col("u_V");
-  c.series.y_um = rec.col("y_um");
-  c.series.sample_time_s = rec.sample_time_s;
-  c.options.io_delay_samples = c.model.io_delay_samples;
-  c.options.io_delay_declared = c.model.io_delay_declared;
+  c.series = load_recordings(a, c.model).data;
+  c.options = diagnosis_options(a, c.model);
   return c;
 }
 
@@ -296,7 +294,7 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsNotAmbiguousWithADriftThatMat
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/piezo_smarthysteresis/";
   auto rig = load_library_case(dir + "linear_model.toml", dir + "piezo_smarthysteresis.csv");
   rig.options.forward_pairs = true;
-  const auto r = control::diagnosis::diagnose(rig.model.model, {rig.series}, rig.options);
+  const auto r = control::diagnosis::diagnose(rig.model.model, rig.series, rig.options);
   ASSERT_EQ(r.verdict, "hysteresis") << r.explanation;
   const auto drift = std::find_if(r.candidates.begin(), r.candidates.end(),
                                   [](const auto& c) { return c.effect.kind == EffectKind::drift; });
@@ -333,7 +331,7 @@ TEST(DiagnoseAmbiguity, ACreepThatLeadsALoopOnlyByAModestFitSegmentMarginLeavesT
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/ambiguous_creep_loop/";
   auto rig = load_library_case(dir + "model.toml", dir + "rec0.csv");
   auto& o = rig.options;
-  const auto r = control::diagnosis::diagnose(rig.model.model, {rig.series}, o);
+  const auto r = control::diagnosis::diagnose(rig.model.model, rig.series, o);
   std::vector<std::string> named = r.ambiguous_with;
   named.push_back(r.verdict);
   const auto has = [&](const char* k) { return std::find(named.begin(), named.end(), k) != named.end(); };
@@ -350,7 +348,7 @@ TEST(DiagnoseAmbiguity, ACreepThatLeadsALoopOnlyByAModestFitSegmentMarginLeavesT
   EXPECT_LT(lead_fit, (1.0 - o.tie_fit_gain) * other_fit);
   EXPECT_GT(lead_fit, (1.0 - o.ambiguity_fit_gain) * other_fit);
   o.ambiguity_fit_gain = o.tie_fit_gain;
-  const auto strict = control::diagnosis::diagnose(rig.model.model, {rig.series}, o);
+  const auto strict = control::diagnosis::diagnose(rig.model.model, rig.series, o);
   EXPECT_EQ(strict.verdict, r.verdict);
   EXPECT_EQ(std::count(strict.ambiguous_with.begin(), strict.ambiguous_with.end(), std::string(to_string(other->effect.kind))), 0)
       << strict.explanation;
