@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -236,12 +237,9 @@ void send_csv(DdsClient& c, const SendArgs& a) {
   std::fprintf(stderr, "\n");
 }
 
-void send(DdsClient& c, const SendArgs& a) {
-  c.connect();
-  if (a.start) ensure_running(c);
-  if (a.kind == "csv") return send_csv(c, a);
-  auto [kind, values] = segment_of(a);  // the wire trajectory borrows the values
-  auto t = make_trajectory(a, kind, values);
+/// `send KIND VALUES...` (every kind but csv) as its segment: one trajectory, refused or accepted.
+void send_segment(DdsClient& c, const SendArgs& a, std::pair<SegmentKind, std::vector<double>> segment) {
+  auto t = make_trajectory(a, segment.first, segment.second);  // borrows the values
   c.send(t);
   std::printf("rig %s: %s accepted\n", c.options().rig.c_str(), a.kind.c_str());
 }
@@ -421,14 +419,20 @@ void add_send_command(CLI::App& app) {
       }
     }
     // A segment that does not fit its kind is a command-line mistake, reported before any rig is reached.
+    std::optional<std::pair<SegmentKind, std::vector<double>>> segment;
     if (a.kind != "csv") try {
-        (void)segment_of(a);
+        segment = segment_of(a);
       } catch (const std::runtime_error& e) {
         throw CLI::ValidationError("VALUES", e.what());
       }
     run_client([&] {
       DdsClient c(*opt);
-      send(c, a);
+      c.connect();
+      if (a.start) ensure_running(c);
+      if (segment)
+        send_segment(c, a, *std::move(segment));
+      else
+        send_csv(c, a);
     });
   });
 }

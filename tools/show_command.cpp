@@ -87,7 +87,7 @@ void plot_recording(const ShowArgs& a, const Recording& rec) {
   const auto& t = rec.col("t_s");
   const auto& u = rec.col("u_V");
   const auto& y = rec.col("y_um");
-  const bool has_r = rec.numeric.count("r_um") > 0;
+  const std::vector<double>* r = rec.numeric.count("r_um") ? &rec.col("r_um") : nullptr;
   const size_t n = t.size();
   const fs::path png(a.plot);
   const ScratchDirectory scratch("pvcgel-show");  // only the PNG is wanted
@@ -96,7 +96,7 @@ void plot_recording(const ShowArgs& a, const Recording& rec) {
   std::ofstream f(dat);
   const size_t stride = std::max<size_t>(1, n / 20000);
   for (size_t k = 0; k < n; k += stride)
-    f << t[k] << ' ' << y[k] << ' ' << (has_r ? rec.col("r_um")[k] : NAN) << ' ' << u[k] << '\n';
+    f << t[k] << ' ' << y[k] << ' ' << (r ? (*r)[k] : NAN) << ' ' << u[k] << '\n';
   f.close();
   std::ofstream g(gp);
   g << "set terminal pngcairo noenhanced size 1100,900 font ',10'\nset output '" << png.string() << "'\n"
