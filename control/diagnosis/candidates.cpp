@@ -1,0 +1,273 @@
+#include "control/diagnosis/candidates.hpp"
+
+#include <cmath>
+#include <numeric>
+
+#include "control/config_error.hpp"
+
+namespace pvcgel::control::diagnosis::detail {
+
+const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k) {
+  for (const auto& c : res.candidates)
+    if (c.fitted && c.effect.kind == k) return &c;
+  return nullptr;
+}
+
+CandidateResult* fitted_candidate(DiagnosisResult& res, EffectKind k) {
+  return const_cast<CandidateResult*>(fitted_candidate(std::as_const(res), k));  // NOLINT: the const lookup, on a mutable result
+}
+
+bool can_run_together(const Effect& a, const Effect& b) {
+  try {
+    validate_mixture(std::vector<Effect>{a, b}, "mixture");
+    return true;
+  } catch (const ConfigError&) {
+    return false;
+  }
+}
+
+Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& scale, const DiagnosisOptions& o,
+                         const std::vector<Series>& data) {
+  const auto z = FitSpace({e.kind}, scale, false, o, &data).z_of({e}, {});
+  Eigen::VectorXd start(z.size() + 1);
+  start << z, time_scale;
+  return start;
+}
+
+namespace {
+
+/// Coarse grid (the evidence) for every candidate: fills res.candidates with it and returns the two best
+/// grid points of each.
+Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                   const DiagnosisOptions& o, double nuisance_cost) {
+  const size_t kinds = kCandidateEffects.size();
+  Starts starts(kinds);
+  std::vector<CandidateResult> evidence(kinds);
+  run_each("coarse grids", kinds, problem, o, [&](size_t i, Problem& own) {
+    const EffectKind kind = kCandidateEffects[i];
+    FitSpace space({kind}, scale, false, o, &data);
+    // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
+    // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
+    for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {
+      const auto grid = coarse_grid(space, [&](const Effect& e) { return own.residual({&e, 1}, ts).squaredNorm(); });
+      if (ts == 1.0) {  // the evidence: at the nominal's time scale, as for every candidate
+        evidence[i].specs = space.specs;
+        evidence[i].evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
+        evidence[i].effect = space.effects(grid.front().second).front();
+      }
+      for (size_t g = 0; g < std::min<size_t>(grid.size(), 2); ++g) {
+        starts[i].emplace_back(grid[g].second.size() + 1);
+        starts[i].back() << grid[g].second, ts;
+      }
+    }
+  });
+  res.candidates.insert(res.candidates.end(), evidence.begin(), evidence.end());
+  return starts;
+}
+
+/// The second pass starts each candidate where the first pass fitted it (its evidence is the first
+/// pass's): one start each instead of the grid's two, a refit after a change of one sample of delay.
+Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& first, const std::vector<Series>& data,
+                   const DataScale& scale, const DiagnosisOptions& o) {
+  Starts starts;
+  for (const auto& c : first) {
+    starts.push_back({start_at(c.effect, c.fitted ? c.time_scale : 1.0, scale, o, data)});
+    res.candidates.push_back(c);
+    res.candidates.back().fitted = false;
+  }
+  return starts;
+}
+
+/// The branch each recording's loop starts on, one recording at a time (virgin, rising or falling), by the
+/// fit-segment cost at z: a recording that starts after a hold at another level, or mid-motion, starts
+/// part of a loop away from virgin, an offset as large as the loop that no effect parameter can take.
+/// Leaves it set in `problem`; returns whether it changed.
+bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
+  const auto e = space.effects(z);
+  const Nominal k = space.g_scale(z);
+  std::vector<double> memory = problem.loop_memory();
+  memory.resize(recordings, 0.0);
+  const auto before = memory;
+  for (size_t r = 0; r < recordings; ++r) {
+    double best = INFINITY, chosen = memory[r];
+    for (double branch : {0.0, 1.0, -1.0}) {
+      memory[r] = branch;
+      problem.set_loop_memory(memory);
+      const double cost = problem.residual(e, k).squaredNorm();
+      if (cost < best) best = cost, chosen = branch;
+    }
+    memory[r] = chosen;
+  }
+  problem.set_loop_memory(memory);
+  return memory != before;
+}
+
+}  // namespace
+
+/// The parameter that chooses between forms fitted in spaces of their own (candidate_spaces), if any.
+std::optional<size_t> form_choice(EffectKind kind) {
+  if (kind == EffectKind::saturation) return 2;               // on_drive
+  if (kind == EffectKind::bias_dependent_dynamics) return 4;  // slow_pole_only
+  return std::nullopt;
+}
+
+namespace {
+
+/// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
+/// (threshold_spread 0), kept only when the free shape does not fit clearly better: on short or
+/// closed-loop data the free shape otherwise bends to the fit segment alone. A choice of form (a
+/// saturation's placement, bias-dependent dynamics on G's slow pole alone) is a space of its own.
+std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, const DiagnosisOptions& o,
+                                       const std::vector<Series>& data, const TransferFunction& G) {
+  std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
+  if (kind == EffectKind::hysteresis) {
+    spaces.push_back(spaces.front());
+    spaces.back().hold(EffectKind::hysteresis, 2, 0.0);  // spread 0
+  } else if (const auto form = form_choice(kind);
+             form && (kind != EffectKind::bias_dependent_dynamics || slowest_pole_is_real(G))) {
+    spaces.push_back(spaces.front());
+    spaces.back().hold(kind, *form, 1.0);  // on the drive; the slow pole alone
+  }
+  return spaces;
+}
+
+/// One joint fit of a candidate (effect parameters and the nominal refit; gain, offset and initial state by
+/// projection) in one of its spaces from one start: the cost it reaches, where, and for a loop the branch
+/// each recording starts on (chosen before the fit and once more after it).
+struct StartFit {
+  double cost = INFINITY;
+  Eigen::VectorXd z;
+  std::vector<double> loop_memory;
+};
+
+StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& problem, size_t recordings) {
+  StartFit out;
+  Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
+  z.head(s0.size() - 1) = s0.head(s0.size() - 1);
+  z.tail(kNominalParams) = space.z_of({space.effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
+  const bool loop = space.kinds.front() == EffectKind::hysteresis;
+  if (loop) choose_loop_memory(problem, space, z, recordings);
+  z = fit_staged(problem, space, z, out.cost);
+  if (loop && choose_loop_memory(problem, space, z, recordings)) z = fit_staged(problem, space, z, out.cost);
+  out.z = std::move(z);
+  if (loop) out.loop_memory = problem.loop_memory();
+  return out;
+}
+
+/// Fills a candidate from the best fit in each of its spaces (candidate_spaces): parameters, errors, score.
+void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
+                      const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
+                      const DiagnosisOptions& o) {
+  // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
+  // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better.
+  const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
+  const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - gain_needed) * best[1].cost ? 1 : 0;
+  c.effect = spaces[v].effects(best[v].z).front();
+  const Nominal k = spaces[v].g_scale(best[v].z);
+  c.time_scale = k.time_scale;
+  c.poly_shape = k.shape;
+  c.poly_next = k.next;
+  c.loop_memory = best[v].loop_memory;
+  c.fitted = true;
+  if (c.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c.loop_memory);
+  const std::vector<Effect> e{c.effect};
+  const auto pred = problem.predict(e, nominal_of(c), true);
+  c.gain = pred.gain;
+  c.errors = errors_of(data, pred.y, held_out);
+}
+
+}  // namespace
+
+/// Fits `candidates[i]` for every i in `which` from starts[i]: every (candidate, space, start) is a
+/// task of its own (a loop's eight fits cost as much as the other candidates together, so whole candidates
+/// balanced badly over threads), the loop's first. Each task starts from `problem`'s loop memory, so the
+/// result does not depend on the order or the threads.
+void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, const std::vector<size_t>& which,
+              const Starts& starts, const std::vector<std::vector<char>>& held_out, Problem& problem,
+              const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  struct Task {
+    size_t candidate, space, start;
+  };
+  std::vector<std::vector<FitSpace>> spaces;
+  std::vector<Task> tasks;
+  for (size_t w = 0; w < which.size(); ++w) {
+    spaces.push_back(candidate_spaces(candidates[which[w]].effect.kind, scale, o, data, problem.model().G));
+    for (size_t v = 0; v < spaces.back().size(); ++v)
+      for (size_t i = 0; i < starts[which[w]].size(); ++i) tasks.push_back({w, v, i});
+  }
+  std::stable_partition(tasks.begin(), tasks.end(), [&](const Task& t) { return spaces[t.candidate].size() > 1; });
+  std::vector<StartFit> fits(tasks.size());
+  run_each(stage, tasks.size(), problem, o, [&](size_t i, Problem& own) {
+    const Task& t = tasks[i];
+    fits[i] = fit_from(spaces[t.candidate][t.space], starts[which[t.candidate]][t.start], own, data.size());
+  });
+  std::vector<std::vector<StartFit>> best(which.size());
+  for (size_t w = 0; w < which.size(); ++w) best[w].resize(spaces[w].size());
+  for (size_t i = 0; i < tasks.size(); ++i) {  // the first start wins ties
+    auto& b = best[tasks[i].candidate][tasks[i].space];
+    if (b.z.size() == 0 || fits[i].cost < b.cost) b = std::move(fits[i]);
+  }
+  for (size_t w = 0; w < which.size(); ++w)
+    finish_candidate(candidates[which[w]], spaces[w], best[w], held_out, problem, data, o);
+}
+
+/// Whether the fitting segment separates candidates `a` and `b` that the held-out data cannot: `a`
+/// explains it clearly better, by `share` of what `b` leaves there and by the ambiguity margin of what the
+/// nuisance-only refit leaves there (two fits at the noise floor differ by noise).
+bool fit_segment_prefers(const CandidateResult& a, const CandidateResult& b, const DiagnosisResult& res,
+                         const DiagnosisOptions& o, double share) {
+  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
+  const auto fit_excess = [&](const ModelErrors& e) { return e.rmse_fit_um * e.rmse_fit_um - s2; };
+  const double gain = fit_excess(b.errors) - fit_excess(a.errors);
+  return gain > share * fit_excess(b.errors) && gain > o.ambiguity_margin * fit_excess(res.nominal_refit.errors);
+}
+
+namespace {
+
+/// When the held-out data cannot separate the two best (their held-out excess within the ambiguity margin
+/// of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
+/// its low-frequency gain), the one that explains the fitting segment clearly better leads.
+void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
+  if (res.candidates.size() < 2 || !res.candidates[1].fitted) return;
+  const Excess excess(res);
+  const auto& a = res.candidates[0];
+  const auto& b = res.candidates[1];
+  if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base && fit_segment_prefers(b, a, res, o, o.tie_fit_gain))
+    std::swap(res.candidates[0], res.candidates[1]);
+}
+
+}  // namespace
+
+/// Fitted candidates by penalised score on the judging segment (Excess: held-out unless it carries no
+/// excess), then the rest by evidence; ties broken on the fit segment.
+void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
+  const Excess excess(res);
+  for (auto& c : res.candidates)
+    if (c.fitted) c.score = excess.score(c.errors, c.specs.size(), o);
+  std::stable_sort(res.candidates.begin(), res.candidates.end(), [](const CandidateResult& a, const CandidateResult& b) {
+    if (a.fitted != b.fitted) return a.fitted;
+    return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
+  });
+  break_tie(res, o);
+}
+
+/// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit
+/// of the leading ones by evidence, ranked by held-out score.
+void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                    const DiagnosisOptions& o, double nuisance_cost, const std::vector<CandidateResult>* warm) {
+  const Starts starts =
+      warm ? warm_starts(res, *warm, data, scale, o) : grid_starts(res, problem, data, scale, o, nuisance_cost);
+  std::vector<size_t> order(res.candidates.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
+  order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
+  fit_each(warm ? "candidate fits at the new delay" : "candidate fits", res.candidates, order, starts, res.held_out,
+           problem, data, scale, o);
+  // What the loop's fit chose stays for the fits that follow (pairs with the loop).
+  for (size_t i : order)
+    if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
+  rank_candidates(res, o);
+}
+
+}  // namespace pvcgel::control::diagnosis::detail

@@ -1,0 +1,98 @@
+#pragma once
+/// @file
+/// The single-effect candidates (internal): each one's coarse grid (the evidence), its joint fit with the
+/// nuisance refit from the best grid points, and the ranking by held-out score (`Excess`).
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <optional>
+#include <stdexcept>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "control/diagnosis/diagnosis.hpp"
+#include "control/diagnosis/fit_problem.hpp"
+
+namespace pvcgel::control::diagnosis::detail {
+
+/// The fitted candidate of kind `k`, or null when that kind was not fitted.
+const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k);
+CandidateResult* fitted_candidate(DiagnosisResult& res, EffectKind k);
+
+/// Whether two effects can run in one model (not the same kind twice, nor two time-scale effects).
+bool can_run_together(const Effect& a, const Effect& b);
+
+/// Every point of a candidate's coarse grid (the product of its parameters' starts), scored by
+/// `cost(effect)`, best first.
+template <class Cost>
+std::vector<std::pair<double, Eigen::VectorXd>> coarse_grid(const FitSpace& space, Cost cost) {
+  std::vector<std::pair<double, Eigen::VectorXd>> grid{{0.0, Eigen::VectorXd::Zero(static_cast<Eigen::Index>(space.specs.size()))}};
+  for (size_t i = 0; i < space.specs.size(); ++i) {
+    std::vector<std::pair<double, Eigen::VectorXd>> next;
+    for (const auto& g : grid)
+      for (double v : space.specs[i].starts) {
+        auto s = g;
+        s.second(static_cast<Eigen::Index>(i)) = space.to_z(i, std::clamp(v, space.specs[i].lower, space.specs[i].upper));
+        next.push_back(s);
+      }
+    grid = std::move(next);
+  }
+  if (grid.empty()) throw std::logic_error("internal: a candidate parameter has no starting value");
+  for (auto& g : grid) g.first = cost(space.effects(g.second).front());
+  std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return grid;
+}
+
+/// The yardstick of the verdict: excess (above-noise) MSE, on the held-out data when the mismatch reaches
+/// it, otherwise on the fit segment; `base` is what the nuisance-only refit leaves.
+struct Excess {
+  double s2 = 0.0, base = 0.0;
+  bool on_validation = true;
+  explicit Excess(const DiagnosisResult& res) : s2(res.noise_sigma_um * res.noise_sigma_um) {
+    const auto& nuis = res.nominal_refit.errors;
+    on_validation = nuis.rmse_validation_um * nuis.rmse_validation_um - s2 > 0.2 * s2;
+    base = (*this)(nuis);
+  }
+  /// The MSE on the segment that judges: held-out, or the fitting segment when the held-out data carry no
+  /// excess (a mode rung only by the start-up transient, which always falls in the first block's fit part).
+  double mse(const ModelErrors& e) const {
+    const double r = on_validation ? e.rmse_validation_um : e.rmse_fit_um;
+    return r * r;
+  }
+  double operator()(const ModelErrors& e) const { return mse(e) - s2; }
+  /// The ranking score: that MSE with a relative penalty per fitted parameter.
+  double score(const ModelErrors& e, size_t parameters, const DiagnosisOptions& o) const {
+    return mse(e) * (1.0 + o.penalty_per_parameter * static_cast<double>(parameters));
+  }
+};
+
+/// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
+/// res.candidates' order.
+using Starts = std::vector<std::vector<Eigen::VectorXd>>;
+
+/// A start of a candidate's full fit at a known effect (not a grid point) and G's time scale.
+Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& scale, const DiagnosisOptions& o,
+                         const std::vector<Series>& data);
+
+/// The parameter that chooses between forms fitted in spaces of their own, if any.
+std::optional<size_t> form_choice(EffectKind kind);
+
+/// Fits `candidates[i]` for every i in `which` from starts[i], each (candidate, space, start) a task.
+void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, const std::vector<size_t>& which,
+              const Starts& starts, const std::vector<std::vector<char>>& held_out, Problem& problem,
+              const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o);
+
+/// Whether the fitting segment separates `a` from `b` (a explains it better by `share` of what b leaves).
+bool fit_segment_prefers(const CandidateResult& a, const CandidateResult& b, const DiagnosisResult& res,
+                         const DiagnosisOptions& o, double share);
+
+/// Fitted candidates by penalised score on the judging segment, then the rest by evidence.
+void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o);
+
+/// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit
+/// of the leading ones by evidence, ranked.
+void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
+                    const DiagnosisOptions& o, double nuisance_cost, const std::vector<CandidateResult>* warm);
+
+}  // namespace pvcgel::control::diagnosis::detail

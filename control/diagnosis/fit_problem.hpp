@@ -1,0 +1,293 @@
+#pragma once
+/// @file
+/// The fitting machinery of the diagnosis (internal): a candidate's parameter space (`FitSpace`), the
+/// simulation of a model with effects and the projection of the linear nuisance parameters (`Problem`),
+/// bounded Levenberg-Marquardt over the rest, and `run_each` for fits on the caller's threads.
+
+#include <Eigen/Dense>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <functional>
+#include <numeric>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "control/diagnosis/diagnosis.hpp"
+#include "control/effect.hpp"
+
+namespace pvcgel::control::diagnosis::detail {
+
+/// Sum of squared residuals over [begin, end) and the count.
+struct SquaredError {
+  double sum = 0.0;
+  double n = 0.0;
+  void add(double r) {
+    sum += r * r;
+    n += 1.0;
+  }
+  [[nodiscard]] double mse() const { return n > 0 ? sum / n : 0.0; }
+};
+
+/// The bounded refit of the nominal model that is fitted as a nonlinear nuisance:
+/// G's time constants scaled by time_scale, f's coefficients above the linear one by shape,
+/// and one odd term of the next order added to f (`next`: its slope at the largest recorded |u| over
+/// f's mean slope f(u)/u there).
+struct Nominal {
+  Nominal(double ts = 1.0, double sh = 1.0, double nx = 0.0) : time_scale(ts), shape(sh), next(nx) {}  // NOLINT: a bare time scale converts
+  double time_scale, shape, next;
+};
+
+constexpr Eigen::Index kNominalParams = 3;
+
+/// Internal (fit) coordinates of a joint fit: the effects' parameters, then
+/// (optionally) G's time scale; log for scale parameters, range-normalised otherwise.
+struct FitSpace {
+  std::vector<EffectKind> kinds;
+  std::vector<ParameterSpec> specs;
+  std::vector<size_t> first;  ///< index of each kind's first parameter in specs
+  bool time_scale = false;    ///< the last three specs are the nominal refit (G's time scale, f's shape, f's next term)
+
+  FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nominal, const DiagnosisOptions& o,
+           const std::vector<Series>* data = nullptr);
+  [[nodiscard]] double scale(size_t i) const { return (specs[i].upper - specs[i].lower) / 100.0; }
+  [[nodiscard]] double to_z(size_t i, double p) const {
+    if (specs[i].fixed) return 0.0;
+    return specs[i].log_scale ? std::log(p) : p / scale(i);
+  }
+  [[nodiscard]] double to_p(size_t i, double z) const {
+    if (specs[i].fixed) return specs[i].lower;
+    const double p = specs[i].log_scale ? std::exp(z) : z * scale(i);
+    return std::clamp(p, specs[i].lower, specs[i].upper);
+  }
+  [[nodiscard]] size_t end_of(size_t e) const {
+    return e + 1 < kinds.size() ? first[e + 1] : specs.size() - (time_scale ? kNominalParams : 0);
+  }
+  [[nodiscard]] std::vector<Effect> effects(const Eigen::VectorXd& z) const {
+    std::vector<Effect> out;
+    for (size_t e = 0; e < kinds.size(); ++e) {
+      Effect x{kinds[e], {}};
+      for (size_t i = first[e]; i < end_of(e); ++i) x.p[i - first[e]] = to_p(i, z(static_cast<Eigen::Index>(i)));
+      out.push_back(x);
+    }
+    return out;
+  }
+  [[nodiscard]] Nominal g_scale(const Eigen::VectorXd& z) const {
+    if (!time_scale) return {};
+    const size_t n = specs.size();
+    return {to_p(n - 3, z(z.size() - 3)), to_p(n - 2, z(z.size() - 2)), to_p(n - 1, z(z.size() - 1))};
+  }
+  /// Holds parameter i of `kind` at `value` (a choice fitted space by space: the saturation's placement).
+  void hold(EffectKind kind, size_t i, double value) {
+    for (size_t e = 0; e < kinds.size(); ++e)
+      if (kinds[e] == kind) {
+        auto& spec = specs[first[e] + i];
+        spec.lower = spec.upper = value;
+        spec.fixed = true;
+      }
+  }
+  /// z of given effects (kinds in this order) and time scale.
+  [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
+    Eigen::VectorXd z(static_cast<Eigen::Index>(specs.size()));
+    for (size_t n = 0; n < kinds.size(); ++n)
+      for (size_t i = first[n]; i < end_of(n); ++i)
+        z(static_cast<Eigen::Index>(i)) = to_z(i, std::clamp(e[n].p[i - first[n]], specs[i].lower, specs[i].upper));
+    if (time_scale) {
+      const size_t n = specs.size();
+      z(z.size() - 3) = to_z(n - 3, k.time_scale);
+      z(z.size() - 2) = to_z(n - 2, k.shape);
+      z(z.size() - 1) = to_z(n - 1, k.next);
+    }
+    return z;
+  }
+};
+
+/// The rest voltage (steady state) whose output matches the first measured samples.
+double rest_from_output(AugmentedPlant& plant, const Series& s);
+
+/// The fit samples of a held-out mask as [begin, end) ranges, so sums over them run on contiguous memory.
+std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_out);
+
+/// Samples [first, last) of a series as an Eigen vector view.
+inline Eigen::Map<const Eigen::VectorXd> segment(const std::vector<double>& v, size_t first, size_t last) {
+  return {v.data() + first, static_cast<Eigen::Index>(last - first)};
+}
+
+/// A model's prediction after the nuisance projection.
+struct Prediction {
+  std::vector<std::vector<double>> y;  ///< per recording, all simulated samples
+  double gain = 1.0;
+  std::vector<double> offset_um;
+};
+
+/// Simulates candidate models and fits the nuisance parameters that enter
+/// linearly by least squares on the fit samples (variable projection): the
+/// overall gain (bounded), a sensor offset per recording and the initial
+/// state of G per recording (G's free-response modes), so no candidate is
+/// blamed for a start not at rest, an offset or a gain error.
+class Problem {
+ public:
+  /// The refit's gain bounds and how far f must stay increasing come from `o`.
+  Problem(const HammersteinModel& m, const std::vector<Series>& d, const std::vector<std::vector<char>>& held_out,
+          const DiagnosisOptions& o)
+      : model_(m), data_(d), gain_(gain_bounds(o)) {
+    for (const auto& mask : held_out) {
+      n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
+      fit_ranges_.push_back(fit_ranges(mask));
+      end_.push_back(fit_ranges_.back().empty() ? 0 : fit_ranges_.back().back().second);
+    }
+    initial_V_.assign(d.size(), NAN);
+    for (const auto& s : d)
+      for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
+    u_keep_ = std::max(o.f_increasing_margin * u_ref_, o.f_increasing_up_to_V);
+  }
+  /// The nominal model, as given (before any refit).
+  [[nodiscard]] const HammersteinModel& model() const noexcept { return model_; }
+  void set_delay(double io) { io_ = io; }
+  [[nodiscard]] double delay() const { return io_; }
+  void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
+  /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
+  /// hysteresis see it. Empty: virgin.
+  void set_loop_memory(std::vector<double> m) { loop_memory_ = std::move(m); }
+  [[nodiscard]] const std::vector<double>& loop_memory() const { return loop_memory_; }
+  [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
+
+  /// Raw simulation (no projection) of every recording up to its fit end, or all of it.
+  std::vector<std::vector<double>> raw(std::span<const Effect> e, Nominal k, bool all) {
+    ++simulations_;
+    const HammersteinModel mk = refit_model(model_, k.time_scale, k.shape, next_coefficient(k.next, k.shape));
+    std::vector<std::vector<double>> out;
+    for (size_t r = 0; r < data_.size(); ++r) {
+      const auto& s = data_[r];
+      AugmentedPlant plant(mk, io_, s.sample_time_s, e);
+      if (r < loop_memory_.size()) plant.set_loop_memory(loop_memory_[r]);
+      const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s) : initial_V_[r];
+      const size_t n = all ? s.u_V.size() : end_[r];
+      out.push_back(plant.simulate(std::span<const double>(s.u_V).first(n), v0));
+    }
+    return out;
+  }
+
+  /// Projects a raw simulation: gain (fitted or 1), offset and initial-state modes per recording.
+  Prediction project(std::vector<std::vector<double>> yhat, double time_scale, bool fit_gain);
+
+  Prediction predict(std::span<const Effect> e, Nominal k, bool fit_gain, bool all = true) {
+    return project(raw(e, k, all), k.time_scale, fit_gain);
+  }
+
+  /// Fit-segment residual after the projection.
+  Eigen::VectorXd residual(std::span<const Effect> e, Nominal k) {
+    const auto p = predict(e, k, true, false);
+    Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
+    Eigen::Index j = 0;
+    for (size_t r = 0; r < data_.size(); ++r)
+      for (const auto& [first, last] : fit_ranges_[r]) {
+        const auto len = static_cast<Eigen::Index>(last - first);
+        out.segment(j, len) = segment(data_[r].y_um, first, last) - segment(p.y[r], first, last);
+        j += len;
+      }
+    return out;
+  }
+  [[nodiscard]] int simulations() const { return simulations_; }
+  void add_simulations(int n) { simulations_ += n; }
+  /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
+  /// as a share of f's mean slope there: c (2n+1) u^(2n) = slope_share f(u) / u.
+  /// A negative term is limited so that f (with `shape`) stays increasing up to the controller's range (at
+  /// least twice the largest recorded |u|): the augmented model must run in that controller.
+  [[nodiscard]] double next_coefficient(double slope_share, double shape = 1.0) const {
+    const int n = model_.f.terms();
+    if (slope_share == 0.0 || n >= OddPolynomial::kMaxTerms) return 0.0;
+    const double unit = model_.f(u_ref_) / u_ref_ / ((2.0 * n + 1.0) * std::pow(u_ref_, 2.0 * n));
+    const auto turns = [&](double share) {
+      return refit_model(model_, 1.0, shape, share * unit).f.first_turnover(u_keep_).has_value();
+    };
+    if (slope_share > 0.0 || !turns(slope_share)) return slope_share * unit;
+    double ok = 0.0, bad = slope_share;  // bisection on the share: `ok` keeps f increasing
+    for (int i = 0; i < 30; ++i) (turns(0.5 * (ok + bad)) ? bad : ok) = 0.5 * (ok + bad);
+    return ok * unit;
+  }
+
+ private:
+  /// Per recording: G's free response (time-scaled by k) from each unit state, and the least-squares
+  /// pieces of the projection that do not depend on the simulation, so each projection is one pass.
+  struct Basis {
+    std::vector<Eigen::VectorXd> modes;   ///< free response from each unit state, all samples
+    Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
+    Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
+  };
+  const std::vector<Basis>& basis(double k);
+
+  const HammersteinModel& model_;
+  const std::vector<Series>& data_;
+  std::vector<std::vector<std::pair<size_t, size_t>>> fit_ranges_;  ///< per recording: [begin, end) of fit samples
+  std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
+  std::vector<double> initial_V_;
+  std::vector<double> loop_memory_;
+  double io_ = 1.0;
+  double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
+  double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
+  std::pair<double, double> gain_;  ///< the refit's gain bounds
+  size_t n_fit_ = 0;
+  int simulations_ = 0;
+  // Two time scales cached: a Jacobian's time-scale column alternates with its base point.
+  std::array<double, 2> basis_k_{NAN, NAN};
+  std::array<std::vector<Basis>, 2> basis_;
+  size_t basis_next_ = 0;  ///< the slot the next new time scale replaces
+};
+
+/// Runs task(i, own) for every i below `count`, `own` a copy of `problem` for task i alone (a fit changes
+/// the loop memory and the caches of the problem it runs on), at once through o.run_tasks when given;
+/// counts their simulations in `problem` and tells o.progress of each task done in `stage`. A copy lives
+/// only while its task runs (each holds G's free-response modes of every recording).
+template <class Task>
+void run_each(std::string_view stage, size_t count, Problem& problem, const DiagnosisOptions& o, Task&& task) {
+  std::vector<int> added(count, 0);
+  std::atomic<size_t> done{0};
+  const std::function<void(size_t)> one = [&](size_t i) {
+    Problem own = problem;
+    task(i, own);
+    added[i] = own.simulations() - problem.simulations();
+    const size_t d = ++done;
+    if (o.progress) o.progress(stage, d, count);
+  };
+  if (o.run_tasks && count > 1) {
+    o.run_tasks(count, one);
+  } else {
+    for (size_t i = 0; i < count; ++i) one(i);
+  }
+  problem.add_simulations(std::accumulate(added.begin(), added.end(), 0));
+}
+
+/// Bounded Levenberg-Marquardt on the simulated output from z (fit coordinates); sets `cost` to the
+/// fit-segment sum of squares it reaches.
+Eigen::VectorXd levenberg_marquardt(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost);
+
+/// Levenberg-Marquardt with f's added term held first, then everything free.
+Eigen::VectorXd fit_staged(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost);
+
+/// RMSE over all samples, over the fit segment and over the held-out data.
+ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
+                      const std::vector<std::vector<char>>& held_out);
+
+/// "name = value, ..." of an effect's parameters.
+std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs);
+
+/// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
+DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal,
+                     const std::vector<std::vector<char>>& held_out);
+
+/// Fit-segment MSE of effects `e` with the nominal refitted as `k`.
+double fit_mse(Problem& p, std::span<const Effect> e, Nominal k);
+
+/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
+Nominal refit_nominal(Problem& p, const DiagnosisOptions& o);
+
+/// The nominal refit a candidate was fitted jointly with.
+inline Nominal nominal_of(const CandidateResult& c) { return {c.time_scale, c.poly_shape, c.poly_next}; }
+/// The nuisance-only refit's nominal.
+inline Nominal nominal_of(const NominalRefit& r) { return {r.time_scale, r.poly_shape, r.poly_next_slope}; }
+
+}  // namespace pvcgel::control::diagnosis::detail
