@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <set>
 #include <sstream>
 
 #include "control/config/config_parser.hpp"
@@ -321,6 +322,25 @@ TEST(DiagnoseRealRecordings, PiezoP885IsHysteresisAtUnderHalfTheLinearModelsErro
   EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
   EXPECT_LT(r.mixture.front().p[0], kMaxCompensatedHysteresisAlpha);
+}
+
+TEST(DiagnoseRealRecordings, CascadedTanksIsNeverForcedIntoAPhysicsTheRigDoesNotHave) {
+  // A real two-tank water rig (tests/data/real/cascaded_tanks, SOURCE.md: the Cascaded Tanks benchmark, time axis
+  // scaled 1/400). The source documents square-root outflow (time constants that grow with the level) and overflow
+  // saturation; against its best two-pole linear model the residual is ~30x the sensor noise, and no candidate
+  // explains 30% of it on held-out data (measured: unexplained, dead_zone leading with 93% left). So the answer
+  // may be `unexplained` or the documented physics, never `none` and never another effect.
+  const auto o = diagnose_real_recordings("cascaded_tanks", {"cascaded_tanks_est.csv", "cascaded_tanks_val.csv"});
+  const auto& r = o.result;
+  EXPECT_NE(r.verdict, "none") << o.summary;
+  EXPECT_GT(r.nominal_refit.errors.rmse_um, 10.0 * r.noise_sigma_um) << o.summary;
+  if (r.verdict != "unexplained") {
+    const std::set<std::string> documented{"saturation", "bias_dependent_dynamics", "asymmetric_dynamics"};
+    for (const auto& e : r.mixture) EXPECT_TRUE(documented.count(std::string(to_string(e.kind)))) << o.summary;
+  }
+  // The source's convention: the pump voltage is held over each sample with no further delay, which the
+  // model file does not declare and the alignment finds.
+  EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
 }
 
 TEST(DiagnoseAmbiguity, ACreepThatLeadsALoopOnlyByAModestFitSegmentMarginLeavesTheLoopNamed) {

@@ -3,9 +3,12 @@
 # (u held over each sample, the daemon's convention with no I/O delay). Pure Python (no numpy).
 # With a third argument N > 1, f is the project's odd polynomial c1 u + c2 u^3 + ... (N terms) instead of
 # K u: the best Hammerstein model without hysteresis (a static curvature is then not blamed on a loop).
+# With a fourth argument 2, G has two real poles, 1/((tau1 s + 1)(tau2 s + 1)) (a cascade of two lags,
+# as two tanks in series), each exactly ZOH-discretised as a partial fraction, on a 40 x 40 grid.
 import sys, math, csv
 path, out = sys.argv[1], sys.argv[2]
 terms = int(sys.argv[3]) if len(sys.argv) > 3 else 1
+poles = int(sys.argv[4]) if len(sys.argv) > 4 else 1
 t, u, y = [], [], []
 with open(path) as f:
     rows = [l for l in f if not l.startswith('#')]
@@ -28,26 +31,46 @@ def solve(A, b):
     return x
 
 
-best = None
-for i in range(80):
-    tau = Ts / 2 * (2.0 / (Ts / 2)) ** (i / 79)
+def lag(v, tau):
+    """A unit-gain first-order lag, exactly ZOH-discretised, at rest at v[0]."""
     a = math.exp(-Ts / tau)
-    cols = []
-    for p in range(terms):  # G applied to u^(2p+1), at rest at u[0] (G(0) = 1)
-        v = [w ** (2 * p + 1) for w in u]; x = [v[0]] * n
-        for k in range(1, n):
-            x[k] = a * x[k - 1] + (1 - a) * v[k - 1]
-        cols.append(x)
+    x = [v[0]] * n
+    for k in range(1, n):
+        x[k] = a * x[k - 1] + (1 - a) * v[k - 1]
+    return x
+
+
+def response(v, taus):
+    """G applied to v: one lag, or two as partial fractions t1/(t1-t2) and -t2/(t1-t2) (DC gain 1)."""
+    if len(taus) == 1:
+        return lag(v, taus[0])
+    t1, t2 = taus
+    a, b = lag(v, t1), lag(v, t2)
+    return [(t1 * p - t2 * q) / (t1 - t2) for p, q in zip(a, b)]
+
+
+steps = 80 if poles == 1 else 40
+grid = [Ts / 2 * (2.0 / (Ts / 2)) ** (i / (steps - 1)) for i in range(steps)]
+best = None
+for taus in ([(t,) for t in grid] if poles == 1 else [(t1, t2) for t1 in grid for t2 in grid if t2 < t1]):
+    cols = [response([w ** (2 * p + 1) for w in u], taus) for p in range(terms)]  # G applied to u^(2p+1)
     cols.append([1.0] * n)
     A = [[sum(p * q for p, q in zip(ci, cj)) for cj in cols] for ci in cols]
     coef = solve(A, [sum(p * q for p, q in zip(ci, y)) for ci in cols])
     fit = [sum(c * col[k] for c, col in zip(coef, cols)) for k in range(n)]
     r = math.sqrt(sum((p - q) ** 2 for p, q in zip(fit, y)) / n)
     if best is None or r < best[0]:
-        best = (r, tau, coef[:-1], coef[-1])
-r, tau, K, c = best
-what = "first-order G and a linear f" if terms == 1 else f"first-order G and an odd polynomial f of {terms} terms"
+        best = (r, taus, coef[:-1], coef[-1])
+r, taus, K, c = best
+order = "first-order G" if poles == 1 else "G with two real poles"
+what = f"{order} and a linear f" if terms == 1 else f"{order} and an odd polynomial f of {terms} terms"
+if poles == 1:
+    G_num, G_den = [1 / taus[0]], [1.0, 1 / taus[0]]
+else:
+    p = taus[0] * taus[1]
+    G_num, G_den = [1 / p], [1.0, (taus[0] + taus[1]) / p, 1 / p]
+fmt = lambda v: ', '.join(f'{x:.8g}' for x in v)
 open(out, 'w').write(f"# The best {'linear' if terms == 1 else 'Hammerstein'} model of {path.split('/')[-1]} (scripts: fit_linear.py): {what}\n"
                      f"# by least squares; RMS residual {r:.4g} um with an offset of {c:.4g} um.\n"
-                     f"[model]\npoly = [{', '.join(f'{k:.8g}' for k in K)}]\nG_num = [{1/tau:.8g}]\nG_den = [1.0, {1/tau:.8g}]\n")
-print(out, 'rms', r, 'tau', tau, 'K', K, 'c', c)
+                     f"[model]\npoly = [{fmt(K)}]\nG_num = [{fmt(G_num)}]\nG_den = [1.0, {fmt(G_den[1:])}]\n")
+print(out, 'rms', r, 'taus', taus, 'K', K, 'c', c)
