@@ -92,6 +92,109 @@ PingPong ddsperf(int domain, int seconds) {
   return r;
 }
 
+/// Telemetry sequence accounting, over both phases: samples received and lost (gaps in `seq`).
+struct TelemetryTally {
+  std::uint64_t received = 0, gaps = 0, last_seq = 0;
+  bool first = true;
+  void add(const pvcgel_v1_Telemetry& s) {
+    if (!first && s.seq != last_seq + 1) gaps += s.seq - last_seq - 1;
+    first = false;
+    last_seq = s.seq;
+    ++received;
+  }
+};
+
+/// pvcgeld on the sim backend, idle, reliable telemetry on `domain`; returns its pid and the config it runs.
+std::pair<pid_t, std::string> start_daemon(int domain) {
+  std::ifstream sim(kSource + "/config/pvcgeld-sim.toml");
+  std::stringstream text;
+  text << sim.rdbuf();
+  std::string cfg = text.str();
+  cfg = std::regex_replace(cfg, std::regex("\ntrajectory = [^\n]*"), "\n");
+  cfg = std::regex_replace(cfg, std::regex("\ndomain = 0"), "\ndomain = " + std::to_string(domain));
+  cfg = std::regex_replace(cfg, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + kDdsConfig + "\"");
+  const std::string cfg_path = "/tmp/bench_dds_" + std::to_string(getpid()) + ".toml";
+  std::ofstream(cfg_path) << cfg;
+  return {spawn({PVCGELD_PATH, "--config", cfg_path}, "/dev/null"), cfg_path};
+}
+
+/// A one-sample hold trajectory at `level` (kind 1, start now), pointing into `level`'s storage.
+pvcgel_v1_Trajectory hold_at(std::vector<double>& level, double blend_s) {
+  pvcgel_v1_Trajectory t{};
+  t.kind = 1;
+  t.start_time_s = -1;
+  t.blend_s = blend_s;
+  t.values._buffer = level.data();
+  t.values._length = t.values._maximum = 1;
+  return t;
+}
+
+/// Setpoints every ~50 ms for `duration_s` (after the soft start) and reliable telemetry: the latency from
+/// each publish to the first cycle that applies it. `published` keeps the setpoints never seen applied.
+std::vector<double> setpoint_latency_us(pvcgel::tools::DdsClient& c, double duration_s, TelemetryTally& tally,
+                                        std::map<std::uint64_t, std::int64_t>& published) {
+  std::vector<double> latency_us;
+  std::vector<double> level{0.0};
+  pvcgel_v1_Trajectory t = hold_at(level, 0.0);
+  const auto start = std::chrono::steady_clock::now();
+  auto next_send = start + std::chrono::seconds(3);  // after the soft start
+  while (std::chrono::steady_clock::now() - start < std::chrono::duration<double>(duration_s)) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= next_send && now - start < std::chrono::duration<double>(duration_s - 0.5)) {
+      level[0] = 1.0 + 0.5 * static_cast<double>(published.size() % 2);
+      const auto seq = c.publish_trajectory(t);
+      published[seq] = t.publish_time_ns;
+      next_send += std::chrono::microseconds(50137);  // not a multiple of the period: every phase is sampled
+    }
+    for (const auto& s : c.take_telemetry(4096)) {
+      tally.add(s);
+      if (auto it = published.find(s.chunk_seq); it != published.end()) {
+        latency_us.push_back(static_cast<double>(s.stamp_ns - it->second) * 1e-3);
+        published.erase(it);  // the first cycle that applied it
+      }
+    }
+    c.take_replies();
+    std::this_thread::sleep_for(std::chrono::microseconds(500));
+  }
+  return latency_us;
+}
+
+/// The loop's wake-up latency (from telemetry) for 10 s quiet, then 10 s while a second client publishes
+/// chunks and commands as fast as it can.
+struct Flood {
+  std::vector<double> quiet_latency_us, flood_latency_us;
+  std::uint64_t published = 0;
+};
+
+Flood flood(pvcgel::tools::DdsClient& c, const pvcgel::tools::ClientOptions& o, TelemetryTally& tally) {
+  Flood f;
+  pvcgel::tools::DdsClient flooder(o);
+  flooder.connect();
+  std::vector<double> level{1.0};
+  pvcgel_v1_Trajectory t = hold_at(level, 0.5);  // publishing stamps it
+  const auto collect = [&](std::vector<double>& into, double seconds, bool flooding) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (std::chrono::steady_clock::now() < end) {
+      if (flooding) {
+        level[0] = 1.0 + 0.5 * static_cast<double>(f.published % 2);
+        flooder.publish_trajectory(t);
+        flooder.publish_command(pvcgel::daemon::CommandKind::set_mode, 2);
+        f.published += 2;
+        if (f.published % 256 == 0) flooder.take_replies();
+      } else {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      for (const auto& s : c.take_telemetry(4096)) {
+        tally.add(s);
+        into.push_back(s.latency_us);
+      }
+    }
+  };
+  collect(f.quiet_latency_us, 10.0, false);
+  collect(f.flood_latency_us, 10.0, true);
+  return f;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -109,18 +212,7 @@ int main(int argc, char** argv) {
   std::printf("  ddsperf round trip p50 %.1f us, p99 %.1f us (median of %d one-second intervals)\n", pp.p50_rtt_us,
               pp.p99_rtt_us, pp.intervals);
 
-  // The daemon: sim backend, idle, reliable telemetry on `domain`.
-  std::ifstream sim(kSource + "/config/pvcgeld-sim.toml");
-  std::stringstream text;
-  text << sim.rdbuf();
-  std::string cfg = text.str();
-  cfg = std::regex_replace(cfg, std::regex("\ntrajectory = [^\n]*"), "\n");
-  cfg = std::regex_replace(cfg, std::regex("\ndomain = 0"), "\ndomain = " + std::to_string(domain));
-  cfg = std::regex_replace(cfg, std::regex("config = \"cyclonedds-loopback.xml\""), "config = \"" + kDdsConfig + "\"");
-  const std::string cfg_path = "/tmp/bench_dds_" + std::to_string(getpid()) + ".toml";
-  std::ofstream(cfg_path) << cfg;
-  const pid_t daemon = spawn({PVCGELD_PATH, "--config", cfg_path}, "/dev/null");
-
+  const auto [daemon, cfg_path] = start_daemon(domain);
   pvcgel::tools::ClientOptions o;
   o.domain = domain;
   o.dds_config = kDdsConfig;
@@ -133,78 +225,12 @@ int main(int argc, char** argv) {
 
   std::printf("pvcgeld: setpoints every 50 ms and reliable telemetry for %.0f s ...\n", duration_s);
   std::fflush(stdout);
+  TelemetryTally tally;
   std::map<std::uint64_t, std::int64_t> published;  // chunk_seq -> publish time
-  std::vector<double> latency_us;
-  std::uint64_t received = 0, gaps = 0, last_seq = 0;
-  bool first = true;
-  std::vector<double> level{0.0};
-  pvcgel_v1_Trajectory t{};
-  t.kind = 1;
-  t.start_time_s = -1;
-  t.values._buffer = level.data();
-  t.values._length = t.values._maximum = 1;
-  const auto start = std::chrono::steady_clock::now();
-  auto next_send = start + std::chrono::seconds(3);  // after the soft start
-  while (std::chrono::steady_clock::now() - start < std::chrono::duration<double>(duration_s)) {
-    const auto now = std::chrono::steady_clock::now();
-    if (now >= next_send && now - start < std::chrono::duration<double>(duration_s - 0.5)) {
-      level[0] = 1.0 + 0.5 * static_cast<double>(published.size() % 2);
-      const auto seq = c.publish_trajectory(t);
-      published[seq] = t.publish_time_ns;
-      next_send += std::chrono::microseconds(50137);  // not a multiple of the period: every phase is sampled
-    }
-    for (const auto& s : c.take_telemetry(4096)) {
-      if (!first && s.seq != last_seq + 1) gaps += s.seq - last_seq - 1;
-      first = false;
-      last_seq = s.seq;
-      ++received;
-      if (auto it = published.find(s.chunk_seq); it != published.end()) {
-        latency_us.push_back(static_cast<double>(s.stamp_ns - it->second) * 1e-3);
-        published.erase(it);  // the first cycle that applied it
-      }
-    }
-    c.take_replies();
-    std::this_thread::sleep_for(std::chrono::microseconds(500));
-  }
-  // Flood: a second client publishes chunks and commands as fast as it can for
-  // 10 s; the loop's wake-up latency (from telemetry) before and during.
+  const auto latency_us = setpoint_latency_us(c, duration_s, tally, published);
   std::printf("flood: a second client publishing as fast as it can for 10 s ...\n");
   std::fflush(stdout);
-  std::vector<double> quiet_latency, flood_latency;
-  std::uint64_t flood_published = 0;
-  {
-    pvcgel::tools::DdsClient flooder(o);
-    flooder.connect();
-    const auto collect = [&](std::vector<double>& into, double seconds, bool flood) {
-      const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-      std::vector<double> lvl{1.0};
-      pvcgel_v1_Trajectory ft{};
-      ft.kind = 1;
-      ft.start_time_s = -1;
-      ft.blend_s = 0.5;
-      ft.values._buffer = lvl.data();
-      ft.values._length = ft.values._maximum = 1;
-      while (std::chrono::steady_clock::now() < end) {
-        if (flood) {
-          lvl[0] = 1.0 + 0.5 * static_cast<double>(flood_published % 2);
-          flooder.publish_trajectory(ft);
-          flooder.publish_command(pvcgel::daemon::CommandKind::set_mode, 2);
-          flood_published += 2;
-          if (flood_published % 256 == 0) flooder.take_replies();
-        } else {
-          std::this_thread::sleep_for(std::chrono::milliseconds(1));
-        }
-        for (const auto& s : c.take_telemetry(4096)) {
-          if (!first && s.seq != last_seq + 1) gaps += s.seq - last_seq - 1;
-          last_seq = s.seq;
-          ++received;
-          into.push_back(s.latency_us);
-        }
-      }
-    };
-    collect(quiet_latency, 10.0, false);
-    collect(flood_latency, 10.0, true);
-  }
+  const Flood f = flood(c, o, tally);
   const auto status = c.fresh_status();
   kill(daemon, SIGTERM);
   waitpid(daemon, nullptr, 0);
@@ -220,11 +246,11 @@ int main(int argc, char** argv) {
   std::printf("  (ddsperf one-way p50 %.1f us; pvcgel p50 / ddsperf one-way p50 = %.1f)\n", pp.p50_rtt_us / 2.0,
               p50 / (pp.p50_rtt_us / 2.0));
   std::printf("telemetry at %.0f Hz, reliable reader: %llu samples received, %llu lost (sequence gaps), %zu setpoints never seen applied\n",
-              1.0 / period_s, static_cast<unsigned long long>(received), static_cast<unsigned long long>(gaps),
+              1.0 / period_s, static_cast<unsigned long long>(tally.received), static_cast<unsigned long long>(tally.gaps),
               published.size());
-  const double q999 = percentile(quiet_latency, 0.999), f999 = percentile(flood_latency, 0.999);
+  const double q999 = percentile(f.quiet_latency_us, 0.999), f999 = percentile(f.flood_latency_us, 0.999);
   std::printf("flood: %llu messages in 10 s, %u refused as rate_limited; loop still %s\n",
-              static_cast<unsigned long long>(flood_published),
+              static_cast<unsigned long long>(f.published),
               status.rejects_by_reason[static_cast<int>(pvcgel::daemon::RejectReason::rate_limited)],
               status.state == 2 ? "RUNNING" : "NOT RUNNING");
   std::printf("  wake-up latency p99.9: quiet %.0f us, during the flood %.0f us: ratio %.2f (target <= 1.20: %s)\n", q999,
