@@ -187,79 +187,108 @@ double log_uniform(std::mt19937_64& rng, double lo, double hi) {
   return std::exp(std::uniform_real_distribution<double>(std::log(lo), std::log(hi))(rng));
 }
 
+/// A closed-loop reference: one of the paper's, or a sine around a random level.
+MultiSine draw_reference(std::mt19937_64& rng, std::string& description) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  if (U(rng) < 0.5) {
+    const auto& name = kPaperReferenceNames[static_cast<size_t>(U(rng) * 3.999)];
+    description = "closed loop, paper reference " + name;
+    return *paper_reference(name);
+  }
+  MultiSine r;
+  r.offset_um = 40.0 + 200.0 * U(rng);
+  r.n_tones = 1;
+  r.tones[0] = {std::min(10.0 + 50.0 * U(rng), 0.8 * r.offset_um), log_uniform(rng, 0.1, 1.0), 0.0};
+  description = "closed loop, sine reference " + std::to_string(std::lround(r.tones[0].amplitude_um)) + " um around " +
+                std::to_string(std::lround(r.offset_um)) + " um";
+  return r;
+}
+
+/// The bias range of an open-loop excitation: low-voltage ones (for effects that only show there) 40..150 V.
+struct BiasRange {
+  double lo, span;
+};
+
+/// Sines at several amplitudes and biases, one per third of the recording.
+void draw_sines(std::mt19937_64& rng, BiasRange b, double Ts, Excitation& ex) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const size_t n = ex.u_V.size();
+  ex.description = "sines";
+  for (size_t seg = 0; seg < 3; ++seg) {
+    const double bias = b.lo + b.span * U(rng);
+    const double amp = (0.3 + 0.65 * U(rng)) * std::min(bias, 780.0 - bias);
+    const double f = log_uniform(rng, 0.1, 2.0);
+    // Appended piece by piece: GCC 12 warns (-Wrestrict, a false positive) on " " + std::to_string(...) here.
+    ex.description.append(" ").append(std::to_string(std::lround(amp))).append("V@").append(std::to_string(std::lround(bias))).append("V");
+    for (size_t k = seg * n / 3; k < (seg + 1) * n / 3; ++k)
+      ex.u_V[k] = bias + amp * std::sin(2 * kPi * f * static_cast<double>(k - seg * n / 3) * Ts);
+  }
+}
+
+/// Steps to random levels, held 1..4 s each.
+void draw_steps(std::mt19937_64& rng, bool low_voltage, double Ts, Excitation& ex) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  ex.description = "steps";
+  double level = 0.0;
+  size_t next = 0;
+  for (size_t k = 0; k < ex.u_V.size(); ++k) {
+    if (k == next) {
+      level = low_voltage ? 10.0 + 200.0 * U(rng) : 20.0 + 730.0 * U(rng);
+      next = k + static_cast<size_t>((1.0 + 3.0 * U(rng)) / Ts);
+    }
+    ex.u_V[k] = level;
+  }
+}
+
+/// Four sines of random frequency and phase around one bias.
+void draw_multisine(std::mt19937_64& rng, bool low_voltage, BiasRange b, double Ts, Excitation& ex) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const double bias = low_voltage ? b.lo + b.span * U(rng) : 150.0 + 300.0 * U(rng);
+  const double room = std::min(bias, 780.0 - bias);
+  ex.description = "multisine around " + std::to_string(std::lround(bias)) + " V";
+  std::array<double, 4> f{}, ph{};
+  for (size_t i = 0; i < 4; ++i) {
+    f[i] = log_uniform(rng, 0.05, 5.0);
+    ph[i] = 2 * kPi * U(rng);
+  }
+  for (size_t k = 0; k < ex.u_V.size(); ++k) {
+    double v = 0.0;
+    for (size_t i = 0; i < 4; ++i) v += std::sin(2 * kPi * f[i] * static_cast<double>(k) * Ts + ph[i]);
+    ex.u_V[k] = bias + 0.24 * room * v;
+  }
+}
+
+/// An exponential chirp from 0.05 Hz to 1..6 Hz over the recording.
+void draw_chirp(std::mt19937_64& rng, bool low_voltage, BiasRange b, double Ts, double T, Excitation& ex) {
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const double bias = low_voltage ? b.lo + b.span * U(rng) : 100.0 + 350.0 * U(rng);
+  const double amp = (0.4 + 0.5 * U(rng)) * std::min(bias, 780.0 - bias);
+  const double f0 = 0.05, f1 = log_uniform(rng, 1.0, 6.0);
+  ex.description = "chirp 0.05.." + std::to_string(std::lround(f1)) + " Hz around " + std::to_string(std::lround(bias)) + " V";
+  for (size_t k = 0; k < ex.u_V.size(); ++k) {
+    const double t = static_cast<double>(k) * Ts;
+    const double phase = 2 * kPi * f0 * T / std::log(f1 / f0) * (std::pow(f1 / f0, t / T) - 1.0);
+    ex.u_V[k] = bias + amp * std::sin(phase);
+  }
+}
+
 Excitation draw_excitation(std::mt19937_64& rng, const GeneratorOptions& o, bool low_voltage, bool no_steps) {
   std::uniform_real_distribution<double> U(0.0, 1.0);
-  const auto n = static_cast<size_t>(std::lround(o.duration_s / o.sample_time_s));
   Excitation ex;
   if (!low_voltage && U(rng) < o.closed_loop_probability) {
     ex.closed_loop = true;
-    if (U(rng) < 0.5) {
-      const auto& name = kPaperReferenceNames[static_cast<size_t>(U(rng) * 3.999)];
-      ex.reference = *paper_reference(name);
-      ex.description = "closed loop, paper reference " + name;
-    } else {
-      ex.reference.offset_um = 40.0 + 200.0 * U(rng);
-      ex.reference.n_tones = 1;
-      ex.reference.tones[0] = {std::min(10.0 + 50.0 * U(rng), 0.8 * ex.reference.offset_um),
-                               log_uniform(rng, 0.1, 1.0), 0.0};
-      ex.description = "closed loop, sine reference " + std::to_string(std::lround(ex.reference.tones[0].amplitude_um)) +
-                       " um around " + std::to_string(std::lround(ex.reference.offset_um)) + " um";
-    }
+    ex.reference = draw_reference(rng, ex.description);
     return ex;
   }
-  ex.u_V.resize(n);
+  ex.u_V.resize(static_cast<size_t>(std::lround(o.duration_s / o.sample_time_s)));
   const double Ts = o.sample_time_s;
   int type = static_cast<int>(U(rng) * 4.0);
   if (no_steps && type == 1) type = 2;
-  // Low-voltage excitations (for effects that only show there): biases 40..150 V.
-  const double bias_lo = low_voltage ? 40.0 : 60.0, bias_span = low_voltage ? 110.0 : 440.0;
-  if (type == 0) {
-    // Sines at several amplitudes and biases, one per third of the recording.
-    ex.description = "sines";
-    for (int seg = 0; seg < 3; ++seg) {
-      const double bias = bias_lo + bias_span * U(rng);
-      const double amp = (0.3 + 0.65 * U(rng)) * std::min(bias, 780.0 - bias);
-      const double f = log_uniform(rng, 0.1, 2.0);
-      ex.description += " " + std::to_string(std::lround(amp)) + "V@" + std::to_string(std::lround(bias)) + "V";
-      for (size_t k = seg * n / 3; k < (seg + 1) * n / 3; ++k)
-        ex.u_V[k] = bias + amp * std::sin(2 * kPi * f * static_cast<double>(k - seg * n / 3) * Ts);
-    }
-  } else if (type == 1) {
-    ex.description = "steps";
-    double level = 0.0;
-    size_t next = 0;
-    for (size_t k = 0; k < n; ++k) {
-      if (k == next) {
-        level = low_voltage ? 10.0 + 200.0 * U(rng) : 20.0 + 730.0 * U(rng);
-        next = k + static_cast<size_t>((1.0 + 3.0 * U(rng)) / Ts);
-      }
-      ex.u_V[k] = level;
-    }
-  } else if (type == 2) {
-    const double bias = low_voltage ? bias_lo + bias_span * U(rng) : 150.0 + 300.0 * U(rng);
-    const double room = std::min(bias, 780.0 - bias);
-    ex.description = "multisine around " + std::to_string(std::lround(bias)) + " V";
-    std::array<double, 4> f{}, ph{};
-    for (int i = 0; i < 4; ++i) {
-      f[static_cast<size_t>(i)] = log_uniform(rng, 0.05, 5.0);
-      ph[static_cast<size_t>(i)] = 2 * kPi * U(rng);
-    }
-    for (size_t k = 0; k < n; ++k) {
-      double v = 0.0;
-      for (size_t i = 0; i < 4; ++i) v += std::sin(2 * kPi * f[i] * static_cast<double>(k) * Ts + ph[i]);
-      ex.u_V[k] = bias + 0.24 * room * v;
-    }
-  } else {
-    const double bias = low_voltage ? bias_lo + bias_span * U(rng) : 100.0 + 350.0 * U(rng);
-    const double amp = (0.4 + 0.5 * U(rng)) * std::min(bias, 780.0 - bias);
-    const double f0 = 0.05, f1 = log_uniform(rng, 1.0, 6.0), T = o.duration_s;
-    ex.description = "chirp 0.05.." + std::to_string(std::lround(f1)) + " Hz around " + std::to_string(std::lround(bias)) + " V";
-    for (size_t k = 0; k < n; ++k) {
-      const double t = static_cast<double>(k) * Ts;
-      const double phase = 2 * kPi * f0 * T / std::log(f1 / f0) * (std::pow(f1 / f0, t / T) - 1.0);
-      ex.u_V[k] = bias + amp * std::sin(phase);
-    }
-  }
+  const BiasRange bias{low_voltage ? 40.0 : 60.0, low_voltage ? 110.0 : 440.0};
+  if (type == 0) draw_sines(rng, bias, Ts, ex);
+  else if (type == 1) draw_steps(rng, low_voltage, Ts, ex);
+  else if (type == 2) draw_multisine(rng, low_voltage, bias, Ts, ex);
+  else draw_chirp(rng, low_voltage, bias, Ts, o.duration_s, ex);
   for (double& u : ex.u_V) u = std::clamp(u, 0.0, 800.0);
   return ex;
 }
