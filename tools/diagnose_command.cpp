@@ -601,7 +601,8 @@ void add_diagnose_command(CLI::App& app) {
       "diagnose",
       "Locate the sim-to-real mismatch in recordings, name the missing physics (hysteresis, creep, dead_zone, "
       "saturation, delay, asymmetric_dynamics, slew_limit, resonance, drift, bias_dependent_dynamics), fit it and "
-      "show the improvement on held-out data (the last 3 s of every 10 s of each recording)");
+      "show the improvement on held-out data (the last 3 s of every 10 s of each recording; the last 30 of every "
+      "100 samples on a rig sampled below 10 Hz)");
   cmd->add_option("--model", args->model, "TOML file with the [model] table (or a full daemon config)")
       ->required()->check(CLI::ExistingFile);
   cmd->add_option("--json", args->json, "write the machine-readable report to FILE");

@@ -24,6 +24,10 @@ struct Series {
   double sample_time_s = 1e-3;
 };
 
+/// The shortest held-out block in samples (100: 30 held out in a row), whatever validation_block_s says: on a
+/// rig sampled below 10 Hz a 10 s block would hold out single samples between fitted ones.
+inline constexpr size_t kMinValidationBlockSamples = 100;
+
 /// Tuning of the decision rules (defaults are what `pvcgel diagnose` uses).
 struct DiagnosisOptions {
   int io_delay_samples = 1;           ///< the model's I/O delay (samples), as `[model] io_delay_samples`
@@ -58,8 +62,9 @@ struct DiagnosisOptions {
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
   double validation_fraction = 0.3;   ///< share of every block held out (its end)
-  double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block (the whole
-                                      ///< recording as one block when shorter than two blocks)
+  double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block, a block at least
+                                      ///< kMinValidationBlockSamples long (the whole recording as one block
+                                      ///< when shorter than two blocks)
   double window_s = 1.0;              ///< localisation window
   double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch

@@ -355,6 +355,30 @@ TEST(Diagnose, ADriftOnsetIsFittedInsideTheFitSegmentNotExtrapolatedFromTheHeldO
   EXPECT_NE(r.verdict, "none") << r.explanation;
 }
 
+TEST(HeldOutMask, TheLast3SOfEvery10SAtTheDaemonsRate) {
+  const auto mask = held_out_mask(25000, 1e-3);
+  EXPECT_EQ(std::count(mask.begin(), mask.end(), 1), 2 * 3000);  // two 10 s blocks; the last 5 s are all fitted
+  for (size_t k : {6999u, 16999u}) EXPECT_EQ(mask[k], 0) << k;
+  for (size_t k : {7000u, 9999u, 17000u}) EXPECT_EQ(mask[k], 1) << k;
+}
+
+TEST(HeldOutMask, ASlowRigHoldsOutStretchesNotSingleSamples) {
+  // A water tank sampled every 4 s: a 10 s block would be 3 samples, every third one held out between two
+  // fitted neighbours. The block is 100 samples instead: 30 held out in a row.
+  const auto mask = held_out_mask(1024, 4.0);
+  size_t run = 0, shortest = 1024;
+  for (size_t k = 0; k <= mask.size(); ++k) {
+    if (k < mask.size() && mask[k]) {
+      ++run;
+    } else if (run > 0) {
+      shortest = std::min(shortest, run);
+      run = 0;
+    }
+  }
+  EXPECT_EQ(shortest, 30u);
+  EXPECT_EQ(std::count(mask.begin(), mask.end(), 1), 10 * 30);  // the last 24 samples, a partial block, are fitted
+}
+
 TEST(CheckSeries, RejectsBadRecordingsNamingTheSample) {
   const auto model = paper_model(3);
   auto s = recording({}, 0.05, 1, 10.0);
