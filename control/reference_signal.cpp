@@ -31,4 +31,13 @@ std::optional<MultiSine> paper_reference(std::string_view name) {
   return std::nullopt;
 }
 
+std::vector<double> multisine_segment_values(const MultiSine& m) {
+  std::vector<double> values{m.offset_um};
+  for (int i = 0; i < m.n_tones; ++i) {
+    const auto& tone = m.tones[static_cast<size_t>(i)];
+    values.insert(values.end(), {tone.amplitude_um, tone.frequency_Hz, tone.phase_rad});
+  }
+  return values;
+}
+
 }  // namespace pvcgel::control

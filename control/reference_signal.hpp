@@ -49,4 +49,8 @@ std::optional<MultiSine> paper_reference(std::string_view name);
 /// The four canonical names in Table III's order.
 inline const std::vector<std::string> kPaperReferenceNames{"0.1Hz", "0.5Hz", "1Hz", "multi"};
 
+/// `m` as a multisine segment's values, [offset, a1, f1, phi1, a2, f2, phi2, ...] (the DDS trajectory layout;
+/// with one tone also a sine segment's). Configuration time: it allocates.
+std::vector<double> multisine_segment_values(const MultiSine& m);
+
 }  // namespace pvcgel::control

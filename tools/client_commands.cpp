@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -13,6 +14,7 @@
 #include <thread>
 
 #include "control/controller.hpp"
+#include "control/reference_signal.hpp"
 #include "daemon/control_loop.hpp"
 #include "daemon/dds/dds_messages.hpp"
 #include "tools/dds_client.hpp"
@@ -164,11 +166,13 @@ std::vector<double> read_setpoint_csv(const std::string& path, double& period_s)
   return r;
 }
 
-/// The paper's references by name (Section V): y_r1 = 100 + 25 sin(2 pi f t), y_r2 the multi-harmonic sum.
-std::pair<SegmentKind, std::vector<double>> paper_reference(const std::string& name) {
-  if (name == "0.1Hz" || name == "0.5Hz" || name == "1Hz") return {SegmentKind::sine, {100.0, 25.0, std::stod(name), 0.0}};
-  if (name == "multi") return {SegmentKind::multisine, {96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0}};
-  throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + name + "'");
+/// One of the paper's references (control::paper_reference, by its canonical name) as a segment: y_r1 a sine,
+/// y_r2 a multisine.
+std::pair<SegmentKind, std::vector<double>> paper_segment(const std::string& name) {
+  const auto& names = control::kPaperReferenceNames;
+  const auto ref = std::find(names.begin(), names.end(), name) != names.end() ? control::paper_reference(name) : std::nullopt;
+  if (!ref) throw std::runtime_error("send paper takes 0.1Hz, 0.5Hz, 1Hz or multi, not '" + name + "'");
+  return {ref->n_tones == 1 ? SegmentKind::sine : SegmentKind::multisine, control::multisine_segment_values(*ref)};
 }
 
 /// The segment of `send KIND VALUES...` (every kind but csv): its kind and values, a sine's phase
@@ -197,7 +201,7 @@ std::pair<SegmentKind, std::vector<double>> segment_of(const SendArgs& a) {
     for (std::size_t i = 1; i + 1 < v.size(); i += 2) w.insert(w.end(), {v[i], v[i + 1], 0.0});
     return {SegmentKind::multisine, w};
   }
-  if (a.kind == "paper") return paper_reference(a.csv);
+  if (a.kind == "paper") return paper_segment(a.csv);
   throw std::runtime_error("unknown trajectory kind '" + a.kind + "'");
 }
 

@@ -249,10 +249,6 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
   return c.effects.find('+') == std::string::npos ? o.verdict == c.effects : names_both(o.mixture, c.effects);
 }
 
-}  // namespace
-
-namespace {
-
 /// One case's line: the truth, the verdict and mixture, the score, the held-out ratio, the time, the
 /// leading candidates and the marks (widened, refit at bound, withheld second, ambiguous, error).
 std::string case_line(const LabelledCase& c, const CaseOutcome& o) {

@@ -104,14 +104,8 @@ SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
 }
 
 std::string fmt_point(const SinePoint& p) {
-  char b[64];
-  std::snprintf(b, sizeof b, "A%03.0f_B%03.0f_f%07.4fHz", p.amplitude_V, p.bias_V, p.frequency_Hz);
-  return b;
+  return format("A%03.0f_B%03.0f_f%07.4fHz", p.amplitude_V, p.bias_V, p.frequency_Hz);
 }
-
-}  // namespace
-
-namespace {
 
 /// Connects for lossless telemetry and refuses a rig in FAULT; returns the loop period (s).
 double connect_for_ident(DdsClient& c, const ClientOptions& rig) {
@@ -146,13 +140,10 @@ SineRecord record_point(DdsClient& c, const SinePoint& p, double Ts, const Clien
   } catch (const std::runtime_error& e) {
     throw std::runtime_error("experiment " + fmt_point(p) + ": " + e.what());
   }
-  char trajectory[96], settle[32], rate[32];
-  std::snprintf(trajectory, sizeof trajectory, "ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz);
-  std::snprintf(settle, sizeof settle, "%g", p.settle_s);
-  std::snprintf(rate, sizeof rate, "%.0f", 1.0 / Ts);
   write_sine_recording(into / (fmt_point(p) + ".csv"), r,
-                       {{"rate_hz", rate}, {"hal_backend", c.status().hal_backend}, {"rig_id", rig.rig},
-                        {"trajectory", trajectory}, {"mode", "open_loop"}, {"settle_s", settle}});
+                       {{"rate_hz", format("%.0f", 1.0 / Ts)}, {"hal_backend", c.status().hal_backend}, {"rig_id", rig.rig},
+                        {"trajectory", format("ident-sine:%g,%g,%g", p.bias_V, p.amplitude_V, p.frequency_Hz)},
+                        {"mode", "open_loop"}, {"settle_s", format("%g", p.settle_s)}});
   return r;
 }
 

@@ -44,6 +44,16 @@ TEST(ReferenceSignal, NamesAreCaseInsensitiveWithOptionalPrefix) {
   for (const auto& n : kPaperReferenceNames) EXPECT_TRUE(paper_reference(n).has_value()) << n;
 }
 
+TEST(ReferenceSignal, SegmentValuesAreTheOffsetThenEachTonesAmplitudeFrequencyAndPhase) {
+  // The layout `pvcgel send paper` and the live view's reference button put on the wire.
+  EXPECT_EQ(multisine_segment_values(*paper_reference("multi")),
+            (std::vector<double>{96.0, 5.0, 0.1, 0.0, 7.0, 0.5, 0.0, 12.0, 1.0, 0.0}));
+  EXPECT_EQ(multisine_segment_values(*paper_reference("1Hz")), (std::vector<double>{100.0, 25.0, 1.0, 0.0}));
+  MultiSine hold;
+  hold.offset_um = 42.0;
+  EXPECT_EQ(multisine_segment_values(hold), std::vector<double>{42.0});
+}
+
 TEST(ReferenceSignal, HoldHasNoTones) {
   MultiSine hold;
   hold.offset_um = 42.0;

@@ -55,11 +55,7 @@ Reply run_reference(DdsClient& c, const json& request) {
     if (!it->is_number()) throw std::invalid_argument("\"blend_s\" must be a number (s)");
     blend_s = it->get<double>();
   }
-  std::vector<double> values{ref->offset_um};
-  for (int i = 0; i < ref->n_tones; ++i) {
-    const auto& tone = ref->tones[static_cast<std::size_t>(i)];
-    values.insert(values.end(), {tone.amplitude_um, tone.frequency_Hz, tone.phase_rad});
-  }
+  std::vector<double> values = control::multisine_segment_values(*ref);
   pvcgel_v1_Trajectory t{};
   t.target = 0;
   t.kind = 4;  // multisine: [offset, a1, f1, phi1, ...]
