@@ -1,11 +1,18 @@
 #include "control/diagnosis/candidates.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 
 #include "control/config_error.hpp"
+#include "control/diagnosis/mode_hint.hpp"
 
 namespace pvcgel::control::diagnosis::detail {
+
+namespace {
+constexpr size_t kModeHints = 2;       ///< residual peaks a mode's grid also starts from
+constexpr double kHintDamping = 0.02;  ///< the damping ratio a mode found as a narrow peak starts from
+}  // namespace
 
 const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k) {
   for (const auto& c : res.candidates)
@@ -34,6 +41,22 @@ Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& sc
   return start;
 }
 
+std::vector<double> mode_hints(const DiagnosisResult& res, const std::vector<Series>& data,
+                               const std::vector<std::vector<double>>& y, const DataScale& scale,
+                               const DiagnosisOptions& o) {
+  const FitSpace mode({EffectKind::resonance}, scale, false, o, &data);
+  return mode_frequency_hints(data, y, res.held_out, res.noise_sigma_um, mode.specs[0].lower, mode.specs[0].upper,
+                              kModeHints);
+}
+
+void add_mode_starts(FitSpace& space, const std::vector<double>& frequencies_Hz) {
+  if (frequencies_Hz.empty()) return;
+  auto& f = space.specs[0].starts;
+  f.insert(f.end(), frequencies_Hz.begin(), frequencies_Hz.end());
+  auto& zeta = space.specs[1].starts;
+  if (std::find(zeta.begin(), zeta.end(), kHintDamping) == zeta.end()) zeta.insert(zeta.begin(), kHintDamping);
+}
+
 namespace {
 
 /// Coarse grid (the evidence) for every candidate: fills res.candidates with it and returns the two best
@@ -43,9 +66,11 @@ Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Ser
   const size_t kinds = kCandidateEffects.size();
   Starts starts(kinds);
   std::vector<CandidateResult> evidence(kinds);
+  const auto hints = mode_hints(res, data, problem.predict({}, 1.0, true).y, scale, o);
   run_each("coarse grids", kinds, problem, o, [&](size_t i, Problem& own) {
     const EffectKind kind = kCandidateEffects[i];
     FitSpace space({kind}, scale, false, o, &data);
+    if (kind == EffectKind::resonance) add_mode_starts(space, hints);
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
     // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
     for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {

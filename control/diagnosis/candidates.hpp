@@ -23,6 +23,15 @@ CandidateResult* fitted_candidate(DiagnosisResult& res, EffectKind k);
 /// Whether two effects can run in one model (not the same kind twice, nor two time-scale effects).
 bool can_run_together(const Effect& a, const Effect& b);
 
+/// Frequencies (at most two) where the residual of the prediction `y` peaks against it, within the
+/// resonance's frequency range (mode_frequency_hints): where a lightly damped mode the grid misses hides.
+std::vector<double> mode_hints(const DiagnosisResult& res, const std::vector<Series>& data,
+                               const std::vector<std::vector<double>>& y, const DataScale& scale,
+                               const DiagnosisOptions& o);
+
+/// Starts a resonance grid at `frequencies_Hz` too, with the light damping a peak there means.
+void add_mode_starts(FitSpace& space, const std::vector<double>& frequencies_Hz);
+
 /// Every point of a candidate's coarse grid (the product of its parameters' starts), scored by
 /// `cost(effect)`, best first.
 template <class Cost>

@@ -41,6 +41,39 @@ struct PairPlan {
   std::optional<Effect> grid_second;
 };
 
+/// A lightly damped mode beside the leader, started where the leader's residual peaks against its
+/// prediction (mode_frequency_hints): the resonance's own fit, made against the whole residual, settles on
+/// a broad lag instead (tuning case012: a 44.8 Hz mode with zeta 0.017 beside a slew limit, fitted alone at
+/// 132 Hz and zeta 0.7). Gives the resonance plan that start (its grid point in the leader's residual), or
+/// adds the plan. Nothing when the residual shows no peak or the leader cannot run beside a mode.
+void add_mode_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res, Problem& problem,
+                   const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  const auto& a = res.candidates.front();
+  const Effect mode{EffectKind::resonance, {}};
+  if (!can_run_together(a.effect, mode)) return;
+  if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
+  const std::vector<Effect> lead{a.effect};
+  const auto y = problem.predict(lead, nominal_of(a), true).y;
+  const auto hints = mode_hints(res, data, y, scale, o);
+  if (hints.empty()) return;
+  // Only the peaks' frequencies: the mode's own fit already started from the octave grid.
+  FitSpace space({EffectKind::resonance}, scale, false, o, &data);
+  space.specs[0].starts.clear();
+  add_mode_starts(space, hints);
+  const Nominal k = nominal_of(a);
+  const auto grid = coarse_grid(space, [&](const Effect& b) {
+    const std::vector<Effect> e{a.effect, b};
+    return problem.residual(e, k).squaredNorm();
+  });
+  const Effect start = space.effects(grid.front().second).front();
+  for (auto& p : plans)
+    if (p.second.kind == EffectKind::resonance) {
+      p.grid_second = start;
+      return;
+    }
+  plans.push_back({start, std::nullopt});
+}
+
 /// The pairs worth fitting: with o.forward_pairs, the forward selection's best second effects; then the
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
@@ -70,6 +103,7 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
     }
   for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i)
     added += add(res.candidates[i].effect, std::nullopt) ? 1 : 0;
+  add_mode_plan(out, res, problem, data, scale, o);
   return out;
 }
 
