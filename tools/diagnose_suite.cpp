@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <ostream>
 
 #include "tools/diagnose_command.hpp"
@@ -155,7 +156,28 @@ std::vector<std::string> csv_fields(const std::string& line) {
 
 struct LabelledCase {
   std::string name, effects, dominant;
+  /// The smallest ratio_after_gain_offset_refit over its effects (the labels' params column); NaN without one.
+  double weakest_after_refit = NAN;
 };
+
+/// The smallest `ratio_after_gain_offset_refit` of the '+'-separated `effects` in the labels' JSON `params`
+/// (NaN when an effect has none); `where` names the row for the error on a params field that is not JSON.
+double weakest_after_refit(const std::string& params, const std::string& effects, const std::string& where) {
+  const auto j = nlohmann::json::parse(params, nullptr, false);
+  if (j.is_discarded()) throw std::runtime_error(where + ": the params column is not JSON");
+  double weakest = INFINITY;
+  for (size_t b = 0; b <= effects.size();) {
+    const size_t e = std::min(effects.find('+', b), effects.size());
+    const std::string name = effects.substr(b, e - b);
+    const auto it = j.is_object() ? j.find(name) : j.end();
+    if (it == j.end() || !it->is_object() || !it->contains("ratio_after_gain_offset_refit") ||
+        !(*it)["ratio_after_gain_offset_refit"].is_number())
+      return NAN;
+    weakest = std::min(weakest, (*it)["ratio_after_gain_offset_refit"].get<double>());
+    b = e + 1;
+  }
+  return weakest;
+}
 
 std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
   std::ifstream f(file);
@@ -169,6 +191,7 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
     return static_cast<size_t>(it - header.begin());
   };
   const size_t c_case = column("case"), c_effects = column("effects"), c_dominant = column("dominant");
+  const auto params = std::find(header.begin(), header.end(), "params");  // the independent generator's
   std::vector<LabelledCase> cases;
   for (long n = 2; std::getline(f, line); ++n) {
     if (line.empty()) continue;
@@ -177,6 +200,9 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
       throw std::runtime_error(file.string() + ":" + std::to_string(n) + ": " + std::to_string(v.size()) + " fields, expected " +
                                std::to_string(header.size()));
     cases.push_back({v[c_case], v[c_effects], v[c_dominant]});
+    if (params != header.end() && v[c_effects] != "none")
+      cases.back().weakest_after_refit = weakest_after_refit(v[static_cast<size_t>(params - header.begin())], v[c_effects],
+                                                             file.string() + ":" + std::to_string(n));
   }
   return cases;
 }
@@ -297,6 +323,10 @@ void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o)
   r.false_second += single_label && o.mixture.find('+') != std::string::npos;
   r.withheld += !o.withheld.empty();
   r.withheld_true += !o.withheld.empty() && lists(c.effects, o.withheld);
+  if (c.weakest_after_refit >= DirectorySuiteResult::kVisibleAfterRefit) {
+    ++(single_label ? r.visible_single_cases : r.visible_mixture_cases);
+    (single_label ? r.visible_single_correct : r.visible_mixture_both_named) += scored_right(c, o);
+  }
   if (single_label) return tally_single(r, c, o);
   ++r.mixture_cases;
   r.mixture_both_named += names_both(o.mixture, c.effects);
@@ -379,7 +409,13 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
                 r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right,
                 r.single_ambiguous, r.single_ambiguous_right, r.single_truth_among_ambiguous);
-  return s + b;
+  s += b;
+  if (r.visible_single_cases + r.visible_mixture_cases > 0)
+    s += format("effects leaving at least %.1fx the noise RMS after a gain and offset refit (the labels' "
+                "ratio_after_gain_offset_refit): single effects %d/%d, mixtures with both named %d/%d\n",
+                DirectorySuiteResult::kVisibleAfterRefit, r.visible_single_correct, r.visible_single_cases,
+                r.visible_mixture_both_named, r.visible_mixture_cases);
+  return s;
 }
 
 }  // namespace pvcgel::tools

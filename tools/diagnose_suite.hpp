@@ -64,6 +64,12 @@ struct DirectorySuiteResult {
   /// Single-effect cases answered with ambiguous_with, those whose verdict is right, and those whose verdict
   /// is wrong but whose ambiguous names hold the truth (a hedge that holds the answer, with an experiment).
   int single_ambiguous = 0, single_ambiguous_right = 0, single_truth_among_ambiguous = 0;
+  /// Single effects and mixtures whose every effect leaves at least kVisibleAfterRefit times the noise RMS
+  /// after a gain and offset refit, by the labels' own measure (the `params` column's
+  /// ratio_after_gain_offset_refit, when the labels have it), and how many of them were scored right: the
+  /// cases the nuisance-only refit cannot simply absorb.
+  static constexpr double kVisibleAfterRefit = 1.5;
+  int visible_single_cases = 0, visible_single_correct = 0, visible_mixture_cases = 0, visible_mixture_both_named = 0;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

@@ -452,11 +452,18 @@ TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) 
   for (const char* f : {"model.toml", "rec0.csv"})
     fs::copy_file(fs::path(PVCGEL_SOURCE_DIR) / "tests/data/ambiguous_creep_loop" / f, suite / "case000" / f,
                   fs::copy_options::overwrite_existing);
-  std::ofstream(suite / "labels.csv") << "case,effects,dominant\ncase000,hysteresis,hysteresis\n";
+  // With the generator's params column: the loop leaves 2x the noise after a gain and offset refit.
+  std::ofstream(suite / "labels.csv")
+      << "case,effects,dominant,params\n"
+         "case000,hysteresis,hysteresis,\"{\"\"hysteresis\"\":{\"\"ratio_after_gain_offset_refit\"\":2.0}}\"\n";
   std::ostringstream log;
   const auto r = run_directory_suite(suite.string(), 1, log);
   const auto text = format_directory_suite(r);
   ASSERT_EQ(r.single_cases, 1) << log.str();
+  EXPECT_EQ(r.visible_single_cases, 1);
+  EXPECT_EQ(r.visible_single_correct, 0);
+  EXPECT_NE(text.find("ratio_after_gain_offset_refit): single effects 0/1, mixtures with both named 0/0"), std::string::npos)
+      << text;
   EXPECT_EQ(r.single_correct, 0) << log.str();
   EXPECT_EQ(r.single_ambiguous, 1) << log.str();
   EXPECT_EQ(r.single_ambiguous_right, 0);
@@ -464,6 +471,18 @@ TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) 
   EXPECT_NE(log.str().find("ambiguous with: hysteresis"), std::string::npos) << log.str();
   EXPECT_NE(text.find("single effects answered as ambiguous: 1 (the verdict right in 0; the truth among the other names in 1)"),
             std::string::npos) << text;
+}
+
+TEST(DiagnoseIndependentSuite, AParamsFieldThatIsNotJsonIsRefusedNamingTheRow) {
+  const auto suite = temp_dir("bad_params_suite");
+  std::ofstream(suite / "labels.csv") << "case,effects,dominant,params\ncase000,creep,creep,{\"\"creep\"\":\n";
+  std::ostringstream log;
+  try {
+    (void)run_directory_suite(suite.string(), 1, log);
+    FAIL() << "a params field that is not JSON was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("labels.csv:2: the params column is not JSON"), std::string::npos) << e.what();
+  }
 }
 
 TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
@@ -486,6 +505,11 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   // No single-effect or none case of the subset names a false second effect (measured at this level).
   EXPECT_EQ(r.false_second, 0);
   EXPECT_LE(r.single_ambiguous_right + r.single_truth_among_ambiguous, r.single_ambiguous);
+  // The subset's labels carry the generator's after-refit ratios: the split covers part of the effect cases.
+  EXPECT_GT(r.visible_single_cases + r.visible_mixture_cases, 0);
+  EXPECT_LE(r.visible_single_cases, r.single_cases);
+  EXPECT_LE(r.visible_single_correct, std::min(r.visible_single_cases, r.single_correct));
+  EXPECT_LE(r.visible_mixture_both_named, std::min(r.visible_mixture_cases, r.mixture_both_named));
 }
 
 }  // namespace
