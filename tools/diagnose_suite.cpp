@@ -170,10 +170,10 @@ double weakest_after_refit(const std::string& params, const std::string& effects
     const size_t e = std::min(effects.find('+', b), effects.size());
     const std::string name = effects.substr(b, e - b);
     const auto it = j.is_object() ? j.find(name) : j.end();
-    if (it == j.end() || !it->is_object() || !it->contains("ratio_after_gain_offset_refit") ||
-        !(*it)["ratio_after_gain_offset_refit"].is_number())
-      return NAN;
-    weakest = std::min(weakest, (*it)["ratio_after_gain_offset_refit"].get<double>());
+    if (it == j.end() || !it->is_object()) return NAN;
+    const auto ratio = it->find("ratio_after_gain_offset_refit");
+    if (ratio == it->end() || !ratio->is_number()) return NAN;
+    weakest = std::min(weakest, ratio->get<double>());
     b = e + 1;
   }
   return weakest;

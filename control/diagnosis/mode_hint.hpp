@@ -15,8 +15,8 @@ namespace pvcgel::control::diagnosis::detail {
 /// y - yhat carries power above the noise `sigma_um` that is a multiple of the prediction's at the same
 /// frequency, a narrow peak of |r(f)| / |yhat(f)| of at least 1: each contiguous fit range of each recording is
 /// Hann-windowed and transformed, and the powers are pooled on a log-frequency grid 1% apart.
-/// Only frequencies where the prediction itself carries power well above the noise can show a peak (a
-/// mode the input does not excite cannot be found in the data). Empty when nothing stands out.
+/// The prediction's power in the ratio is guarded by ten times the noise's, so a mode rung by little input
+/// (a tone's leakage, a step) still shows while cells of noise alone do not. Empty when nothing stands out.
 std::vector<double> mode_frequency_hints(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
                                          const std::vector<std::vector<char>>& held_out, double sigma_um,
                                          double f_min_Hz, double f_max_Hz, size_t count);

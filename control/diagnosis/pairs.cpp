@@ -53,14 +53,14 @@ void add_mode_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res, Pro
   if (!can_run_together(a.effect, mode)) return;
   if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
   const std::vector<Effect> lead{a.effect};
-  const auto y = problem.predict(lead, nominal_of(a), true).y;
+  const Nominal k = nominal_of(a);
+  const auto y = problem.predict(lead, k, true).y;
   const auto hints = mode_hints(res, data, y, scale, o);
   if (hints.empty()) return;
   // Only the peaks' frequencies: the mode's own fit already started from the octave grid.
   FitSpace space({EffectKind::resonance}, scale, false, o, &data);
   space.specs[0].starts.clear();
   add_mode_starts(space, hints);
-  const Nominal k = nominal_of(a);
   const auto grid = coarse_grid(space, [&](const Effect& b) {
     const std::vector<Effect> e{a.effect, b};
     return problem.residual(e, k).squaredNorm();
