@@ -179,7 +179,11 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
               {"onset_s", 0.0, onset_max, false, {0.0, std::min(0.25 * dur, onset_max), std::min(0.5 * dur, onset_max)}},
               // Thermal drift settles; a settling time a thousand recordings long is a ramp (0, the
               // default of older files, is exactly one), a fiftieth of one nearly a step.
-              {"settling_time_s", 0.02 * dur, std::max(1e3 * dur, 1.0), true, {1e3 * dur, 0.3 * dur}, 0.0}};
+              {"settling_time_s", 0.02 * dur, std::max(1e3 * dur, 1.0), true, {1e3 * dur, 0.3 * dur}, 0.0},
+              // A drift that wanders (a random walk: thermal or sensor) is no function of time a model can
+              // carry; its size is. Not fitted as a number (fixed): diagnose fits such a drift as a smooth
+              // curve through each recording (a space of its own) and sets this from the curve.
+              {"wander_um_per_sqrt_s", 0.0, 10.0 * y_abs, false, {0.0}, 0.0, true}};
     }
     case EffectKind::bias_dependent_dynamics:
       // beta per reference displacement: the largest recorded one, so beta means the same for a nanometre
@@ -219,7 +223,7 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
     case EffectKind::resonance: return "a structural resonance (mass-spring mode): in series behind the gel dynamics, or driven beside them by the actuator force (parallel share)";
     case EffectKind::drift:
       return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage, "
-             "a ramp or one that settles";
+             "a ramp, one that settles, or one that wanders";
     case EffectKind::bias_dependent_dynamics:
       return "operating-point-dependent dynamics: the poles move (slow down or speed up) with the displacement's "
              "level or with its swing about that level";

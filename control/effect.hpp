@@ -184,6 +184,9 @@ inline double drift_um(const std::array<double, kMaxEffectParams>& q, double t_s
   return q[0] + q[1] * (q[3] > 0.0 ? -q[3] * std::expm1(-t / q[3]) : t);
 }
 
+/// The drift effect's parameter that makes it wander (wander_um_per_sqrt_s, 0: a drift that does not).
+inline constexpr size_t kDriftWander = 4;
+
 /// Kelvin-Voigt creep branches (fraction of G(0), time constant in s) of a creep
 /// effect's parameters: one at tau, or three (fraction / 3 each) spread
 /// log-uniformly over `spread_decades` around tau (log-type creep).
@@ -238,7 +241,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    + rho G(0) M (a fast mode fed by the actuator's force, not filtered by G: modal superposition; rho 0,
 ///    the default, is the series form alone);
 ///  - drift: offset + rate max(t - onset, 0), settling exponentially over settling_time_s when it is not 0
-///    (drift_um), independent of the input;
+///    (drift_um), independent of the input; wander_um_per_sqrt_s > 0 adds a random walk (RMS change
+///    wander sqrt(T) over T) that no prediction can follow: this plant leaves it out, SimulatedRig draws it;
 ///  - bias_dependent_dynamics: G runs (1 + (beta y_op + amplitude_beta y_swing) / y_ref) times slower, y_op the
 ///    displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over the
 ///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the

@@ -60,7 +60,8 @@ class HysteresisOperator final {
 ///    mapped to the linear block's output, y_lin = sat^-1(y - drift(t)), so the
 ///    PID, the DOB and the feedforward work on the model they were designed
 ///    for; drift is a known additive term (feedforward through the reference),
-///    its time counted from the controller's last reset_steady_state;
+///    its time counted from the controller's last reset_steady_state (its wander,
+///    a random walk, is no known term: the feedback meets it as a disturbance);
 ///  - creep: a known additive term, predicted online: its Kelvin-Voigt branches
 ///    (effect.hpp) run on the linear block's input actually applied, delayed as
 ///    the plant delays it, and their output is subtracted from measurement and

@@ -26,6 +26,8 @@ SimulatedRig::SimulatedRig(const SimRigConfig& c) : cfg_(c), rng_(c.seed) {
       throw ConfigError("sim.truth.effect", "a diagnosed effect replaces the rig's built-in effects: set [sim.hysteresis] "
                                             "and [sim.creep] enabled = false");
     augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, std::span<const Effect>(c.added_effects));
+    for (const auto& e : c.added_effects)
+      if (e.kind == EffectKind::drift) wander_step_um_ = e.p[kDriftWander] * std::sqrt(c.sample_time_s);
   }
   reset_steady_state(0.0);
 }
@@ -35,6 +37,7 @@ double SimulatedRig::static_output(double x) const noexcept { return cfg_.truth.
 void SimulatedRig::reset_steady_state(double u) noexcept {
   if (augmented_) {
     augmented_->reset_steady_state(u);
+    wander_um_ = 0.0;
     y_true_ = augmented_->output();
     return;
   }
@@ -57,7 +60,8 @@ double SimulatedRig::measure() noexcept {
 void SimulatedRig::apply(double u) noexcept {
   if (augmented_) {
     augmented_->apply(u);
-    y_true_ = augmented_->output();
+    if (wander_step_um_ > 0.0) wander_um_ += wander_step_um_ * noise_(rng_);
+    y_true_ = augmented_->output() + wander_um_;
     return;
   }
   // The amplifier output during this sample is the command from io_delay samples ago.

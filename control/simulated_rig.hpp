@@ -48,7 +48,8 @@ struct SimRigConfig {
   /// Effects diagnosed by `pvcgel diagnose` (`[[sim.truth.effect]]`, dominant
   /// first, at most kMaxEffects): the truth then runs as
   /// AugmentedPlant (model plus these effects) and the built-in
-  /// hysteresis and creep must be off.
+  /// hysteresis and creep must be off. A drift that wanders draws its random
+  /// walk here (from `seed`), restarted at zero by every reset.
   std::vector<Effect> added_effects{};
 
   /// This rig with `truth` as its plant and every effect beyond the Hammerstein
@@ -97,6 +98,8 @@ class SimulatedRig final {
   double x_sat_ = 1000.0;
   double u_prev_ = 0.0, h_ = 0.0;
   double y_true_ = 0.0;
+  double wander_step_um_ = 0.0;  ///< a wandering drift's RMS step per sample (0: none)
+  double wander_um_ = 0.0;       ///< its random walk since the last reset
   std::optional<AugmentedPlant> augmented_;
   std::mt19937_64 rng_;
   std::normal_distribution<double> noise_{0.0, 1.0};

@@ -1,6 +1,7 @@
 #include "control/diagnosis/candidates.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -133,7 +134,16 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
 std::optional<size_t> form_choice(EffectKind kind) {
   if (kind == EffectKind::saturation) return 2;               // on_drive
   if (kind == EffectKind::bias_dependent_dynamics) return 4;  // slow_pole_only
+  if (kind == EffectKind::drift) return kDriftWander;
   return std::nullopt;
+}
+
+void hold_form(FitSpace& space, EffectKind kind, double value) {
+  const auto form = form_choice(kind);
+  if (!form) return;
+  space.hold(kind, *form, value);
+  if (kind == EffectKind::drift && value > 0.0)
+    for (size_t i : {1, 2, 3}) space.hold(kind, i, 0.0);  // rate, onset, settling: the spline follows them
 }
 
 namespace {
@@ -141,7 +151,8 @@ namespace {
 /// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
 /// (threshold_spread 0), kept only when the free shape does not fit clearly better: on short or
 /// closed-loop data the free shape otherwise bends to the fit segment alone. A choice of form (a
-/// saturation's placement, bias-dependent dynamics on G's slow pole alone) is a space of its own.
+/// saturation's placement, bias-dependent dynamics on G's slow pole alone, a drift that wanders) is a
+/// space of its own.
 std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, const DiagnosisOptions& o,
                                        const std::vector<Series>& data, const TransferFunction& G) {
   std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
@@ -151,7 +162,8 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
   } else if (const auto form = form_choice(kind);
              form && (kind != EffectKind::bias_dependent_dynamics || slowest_pole_is_real(G))) {
     spaces.push_back(spaces.front());
-    spaces.back().hold(kind, *form, 1.0);  // on the drive; the slow pole alone
+    // On the drive; the slow pole alone; a wandering drift (its size set after the fit, from its splines).
+    hold_form(spaces.back(), kind, 1.0);
   }
   return spaces;
 }
@@ -179,6 +191,21 @@ StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& pro
   return out;
 }
 
+/// A drift's spline fits the fit segment better than a ramp always (a knot per block): the held-out data
+/// choose between the two forms, the ramp unless the spline leaves clearly less there (kSplineGain: on a
+/// ramp the two tie within noise, and the spline's many knots would then decide a tie with creep).
+constexpr double kSplineGain = 0.05;
+
+size_t drift_form(const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
+                  const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data) {
+  std::array<double, 2> rmse{};
+  for (size_t v = 0; v < 2; ++v) {
+    const auto e = spaces[v].effects(best[v].z);
+    rmse[v] = errors_of(data, problem.predict(e, spaces[v].g_scale(best[v].z), true).y, held_out).rmse_validation_um;
+  }
+  return rmse[1] * rmse[1] < (1.0 - kSplineGain) * rmse[0] * rmse[0] ? 1 : 0;
+}
+
 /// Fills a candidate from the best fit in each of its spaces (candidate_spaces): parameters, errors, score.
 void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, const std::vector<StartFit>& best,
                       const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
@@ -186,7 +213,10 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
   // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better.
   const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
-  const size_t v = spaces.size() > 1 && best[0].cost > (1.0 - gain_needed) * best[1].cost ? 1 : 0;
+  const bool drift = spaces[0].kinds.front() == EffectKind::drift;
+  const size_t v = spaces.size() < 2 ? 0
+                   : drift        ? drift_form(spaces, best, held_out, problem, data)
+                                  : (best[0].cost > (1.0 - gain_needed) * best[1].cost ? 1 : 0);
   c.effect = spaces[v].effects(best[v].z).front();
   const Nominal k = spaces[v].g_scale(best[v].z);
   c.time_scale = k.time_scale;
@@ -197,6 +227,7 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   if (c.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c.loop_memory);
   const std::vector<Effect> e{c.effect};
   const auto pred = problem.predict(e, nominal_of(c), true);
+  if (wanders(e)) c.effect.p[kDriftWander] = std::max(pred.wander_um_per_sqrt_s, 1e-12);
   c.gain = pred.gain;
   c.errors = errors_of(data, pred.y, held_out);
 }
@@ -268,7 +299,7 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   const Excess excess(res);
   for (auto& c : res.candidates)
-    if (c.fitted) c.score = excess.score(c.errors, c.specs.size(), o);
+    if (c.fitted) c.score = excess.score(c.errors, c.specs.size() - unused_parameters({&c.effect, 1}), o);
   std::stable_sort(res.candidates.begin(), res.candidates.end(), [](const CandidateResult& a, const CandidateResult& b) {
     if (a.fitted != b.fitted) return a.fitted;
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;

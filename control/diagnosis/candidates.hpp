@@ -87,6 +87,18 @@ Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& sc
 /// The parameter that chooses between forms fitted in spaces of their own, if any.
 std::optional<size_t> form_choice(EffectKind kind);
 
+/// Parameters among `effects`' specs that their forms leave out: a drift that does not wander has no
+/// wander (a form choice counts as a parameter where the form is one, as a saturation's placement).
+inline size_t unused_parameters(std::span<const Effect> effects) {
+  return static_cast<size_t>(std::count_if(effects.begin(), effects.end(), [](const Effect& e) {
+    return e.kind == EffectKind::drift && e.p[kDriftWander] == 0.0;
+  }));
+}
+
+/// Holds `kind`'s form (form_choice's parameter) at `value` in `space`; a drift that wanders (value > 0)
+/// is its spline alone, without the ramp's parameters beside it.
+void hold_form(FitSpace& space, EffectKind kind, double value);
+
 /// Fits `candidates[i]` for every i in `which` from starts[i], each (candidate, space, start) a task.
 void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, const std::vector<size_t>& which,
               const Starts& starts, const std::vector<std::vector<char>>& held_out, Problem& problem,

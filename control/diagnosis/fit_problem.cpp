@@ -110,14 +110,57 @@ std::vector<Eigen::VectorXd> free_response_modes(const StateSpace& d, Eigen::Ind
   return modes;
 }
 
+/// Uniform cubic B-splines over N samples, knots every `block` samples from sample 0, without the first
+/// (the splines sum to one, and the projection fits an offset of its own).
+std::vector<Eigen::VectorXd> spline_columns(Eigen::Index N, size_t block) {
+  const auto intervals = static_cast<size_t>((N + static_cast<Eigen::Index>(block) - 1) / static_cast<Eigen::Index>(block));
+  std::vector<Eigen::VectorXd> columns(intervals + 3, Eigen::VectorXd::Zero(N));
+  for (Eigen::Index t = 0; t < N; ++t) {
+    const auto i = static_cast<size_t>(t) / block;
+    const double u = static_cast<double>(static_cast<size_t>(t) - i * block) / static_cast<double>(block), v = 1.0 - u;
+    columns[i](t) = v * v * v / 6.0;
+    columns[i + 1](t) = (3.0 * u * u * u - 6.0 * u * u + 4.0) / 6.0;
+    columns[i + 2](t) = (-3.0 * u * u * u + 3.0 * u * u + 3.0 * u + 1.0) / 6.0;
+    columns[i + 3](t) = u * u * u / 6.0;
+  }
+  columns.erase(columns.begin());
+  return columns;
+}
+
 }  // namespace
 
-const std::vector<Problem::Basis>& Problem::basis(double k) {
+bool wanders(std::span<const Effect> e) {
+  return std::any_of(e.begin(), e.end(), [](const Effect& x) { return x.kind == EffectKind::drift && x.p[kDriftWander] > 0.0; });
+}
+
+size_t Problem::block_length(const std::vector<char>& mask) {
+  const auto held = std::find(mask.begin(), mask.end(), 1);
+  return std::max<size_t>(static_cast<size_t>(std::find(held, mask.end(), 0) - mask.begin()), 1);
+}
+
+double Problem::wander_size(const std::vector<Basis>& basis, const std::vector<Eigen::VectorXd>& coefficients) const {
+  double sum = 0.0, knots = 0.0;
+  for (size_t r = 0; r < data_.size(); ++r) {
+    const auto& b = basis[r];
+    const auto N = static_cast<size_t>(b.modes.front().size());
+    double previous = NAN;
+    for (size_t t = 0; t < N + block_[r]; t += block_[r]) {
+      double at = 0.0;
+      for (size_t j = b.free_modes; j < b.modes.size(); ++j)
+        at += coefficients[r](static_cast<Eigen::Index>(j + 1)) * b.modes[j](static_cast<Eigen::Index>(std::min(t, N - 1)));
+      if (!std::isnan(previous)) sum += (at - previous) * (at - previous) / (static_cast<double>(block_[r]) * data_[r].sample_time_s), knots += 1.0;
+      previous = at;
+    }
+  }
+  return knots > 0.0 ? std::sqrt(sum / knots) : 0.0;
+}
+
+const std::vector<Problem::Basis>& Problem::basis(double k, bool wander) {
   for (size_t slot = 0; slot < basis_k_.size(); ++slot)
-    if (k == basis_k_[slot]) return basis_[slot];
+    if (std::pair{k, wander} == basis_k_[slot]) return basis_[slot];
   const size_t slot = basis_next_;
   basis_next_ = (basis_next_ + 1) % basis_k_.size();
-  basis_k_[slot] = k;
+  basis_k_[slot] = {k, wander};
   auto& out = basis_[slot];
   out.clear();
   StateSpace ss = realize(model_.G, "model.G");
@@ -126,9 +169,12 @@ const std::vector<Problem::Basis>& Problem::basis(double k) {
   for (size_t r = 0; r < data_.size(); ++r) {
     const auto& s = data_[r];
     const auto d = discretize_zoh(ss, s.sample_time_s);
-    const auto n = d.A.rows();
     Basis b;
     b.modes = free_response_modes(d, static_cast<Eigen::Index>(s.y_um.size()));
+    b.free_modes = b.modes.size();
+    if (wander)
+      for (auto& c : spline_columns(static_cast<Eigen::Index>(s.y_um.size()), block_[r])) b.modes.push_back(std::move(c));
+    const auto n = static_cast<Eigen::Index>(b.modes.size());
     // psi = (1, modes): its Gram matrix and psi' y over the fit samples.
     Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
     Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
@@ -154,8 +200,8 @@ const std::vector<Problem::Basis>& Problem::basis(double k) {
   return out;
 }
 
-Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain) {
-  const auto& basis_r = basis(k);
+Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain, bool wander) {
+  const auto& basis_r = basis(k, wander);
   const size_t R = data_.size();
   std::vector<Eigen::VectorXd> u_h(R);
   double num = 0.0, den = 0.0;
@@ -177,14 +223,16 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
   }
   Prediction p;
   p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_.first, gain_.second) : 1.0;
+  std::vector<Eigen::VectorXd> coefficients;
   for (size_t r = 0; r < R; ++r) {
     const auto& m = basis_r[r].modes;
-    const Eigen::VectorXd c = basis_r[r].data_coefficients - p.gain * u_h[r];
+    const Eigen::VectorXd& c = coefficients.emplace_back(basis_r[r].data_coefficients - p.gain * u_h[r]);
     p.offset_um.push_back(c(0));
     Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
     y = (p.gain * y).array() + c(0);
     for (size_t j = 0; j < m.size(); ++j) y += c(static_cast<Eigen::Index>(j + 1)) * m[j].head(y.size());
   }
+  if (wander) p.wander_um_per_sqrt_s = wander_size(basis_r, coefficients);
   p.y = std::move(yhat);
   return p;
 }

@@ -121,13 +121,21 @@ struct Prediction {
   std::vector<std::vector<double>> y;  ///< per recording, all simulated samples
   double gain = 1.0;
   std::vector<double> offset_um;
+  /// A wandering drift's size from its fitted curves (their RMS change from knot to knot over the
+  /// knot spacing's square root); 0 when the model has no such drift.
+  double wander_um_per_sqrt_s = 0.0;
 };
+
+/// Whether `e` holds a drift that wanders: the projection then also fits a smooth curve per recording.
+bool wanders(std::span<const Effect> e);
 
 /// Simulates candidate models and fits the nuisance parameters that enter
 /// linearly by least squares on the fit samples (variable projection): the
 /// overall gain (bounded), a sensor offset per recording and the initial
 /// state of G per recording (G's free-response modes), so no candidate is
-/// blamed for a start not at rest, an offset or a gain error.
+/// blamed for a start not at rest, an offset or a gain error. A drift that wanders adds a cubic spline
+/// per recording to those, knotted at its held-out blocks, so every held-out stretch lies between
+/// fitted data the curve passes through.
 class Problem {
  public:
   /// The refit's gain bounds and how far f must stay increasing come from `o`.
@@ -138,6 +146,7 @@ class Problem {
       n_fit_ += static_cast<size_t>(std::count(mask.begin(), mask.end(), 0));
       fit_ranges_.push_back(fit_ranges(mask));
       end_.push_back(fit_ranges_.back().empty() ? 0 : fit_ranges_.back().back().second);
+      block_.push_back(block_length(mask));
     }
     initial_V_.assign(d.size(), NAN);
     for (const auto& s : d)
@@ -171,11 +180,12 @@ class Problem {
     return out;
   }
 
-  /// Projects a raw simulation: gain (fitted or 1), offset and initial-state modes per recording.
-  Prediction project(std::vector<std::vector<double>> yhat, double time_scale, bool fit_gain);
+  /// Projects a raw simulation: gain (fitted or 1), offset and initial-state modes per recording, and
+  /// with `wander` a drift's spline.
+  Prediction project(std::vector<std::vector<double>> yhat, double time_scale, bool fit_gain, bool wander = false);
 
   Prediction predict(std::span<const Effect> e, Nominal k, bool fit_gain, bool all = true) {
-    return project(raw(e, k, all), k.time_scale, fit_gain);
+    return project(raw(e, k, all), k.time_scale, fit_gain, wanders(e));
   }
 
   /// Fit-segment residual after the projection.
@@ -214,16 +224,22 @@ class Problem {
   /// Per recording: G's free response (time-scaled by k) from each unit state, and the least-squares
   /// pieces of the projection that do not depend on the simulation, so each projection is one pass.
   struct Basis {
-    std::vector<Eigen::VectorXd> modes;   ///< free response from each unit state, all samples
+    std::vector<Eigen::VectorXd> modes;   ///< free response from each unit state, then the spline's columns
+    size_t free_modes = 0;                ///< how many of `modes` are G's free response
     Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
     Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
   };
-  const std::vector<Basis>& basis(double k);
+  const std::vector<Basis>& basis(double k, bool wander);
+  /// The length of a held-out mask's blocks (held_out_mask), in samples.
+  static size_t block_length(const std::vector<char>& mask);
+  /// The wander of a projection's splines (Prediction::wander_um_per_sqrt_s), from their coefficients.
+  [[nodiscard]] double wander_size(const std::vector<Basis>& basis, const std::vector<Eigen::VectorXd>& coefficients) const;
 
   const HammersteinModel& model_;
   const std::vector<Series>& data_;
   std::vector<std::vector<std::pair<size_t, size_t>>> fit_ranges_;  ///< per recording: [begin, end) of fit samples
   std::vector<size_t> end_;  ///< one past the last fitted sample, per recording
+  std::vector<size_t> block_;  ///< the held-out block length, per recording (a wandering drift's knot spacing)
   std::vector<double> initial_V_;
   std::vector<double> loop_memory_;
   double io_ = 1.0;
@@ -233,7 +249,7 @@ class Problem {
   size_t n_fit_ = 0;
   int simulations_ = 0;
   // Two time scales cached: a Jacobian's time-scale column alternates with its base point.
-  std::array<double, 2> basis_k_{NAN, NAN};
+  std::array<std::pair<double, bool>, 2> basis_k_{{{NAN, false}, {NAN, false}}};
   std::array<std::vector<Basis>, 2> basis_;
   size_t basis_next_ = 0;  ///< the slot the next new time scale replaces
 };

@@ -399,12 +399,18 @@ std::string parse_error(const std::string& text) {
 
 TEST(Effect, ADriftWithoutASettlingTimeIsTheRampOfOlderFiles) {
   const auto specs = parameter_specs(EffectKind::drift, DataScale{});
-  ASSERT_EQ(specs.size(), 4u);
+  ASSERT_EQ(specs.size(), 5u);
   EXPECT_EQ(specs[3].name, "settling_time_s");
   EXPECT_EQ(specs[3].default_value, 0.0);
+  EXPECT_EQ(specs[kDriftWander].name, "wander_um_per_sqrt_s");
+  EXPECT_EQ(specs[kDriftWander].default_value, 0.0);
   const auto drift = parse_effects("[[sim.truth.effect]]\nname = \"drift\"\noffset_um = 0.1\nrate_um_per_s = 0.2\nonset_s = 0\n");
   ASSERT_EQ(drift.size(), 1u);
   EXPECT_EQ(drift[0].p[3], 0.0);
+  EXPECT_EQ(drift[0].p[kDriftWander], 0.0);  // an older file's drift does not wander
+  EXPECT_EQ(parse_error("[[sim.truth.effect]]\nname = \"drift\"\noffset_um = 0\nrate_um_per_s = 0\nonset_s = 0\n"
+                        "wander_um_per_sqrt_s = -0.1\n"),
+            "sim.truth.effect[0].wander_um_per_sqrt_s");
   EXPECT_DOUBLE_EQ(drift_um(drift[0].p, 30.0), 0.1 + 0.2 * 30.0);
   // The fit reaches a ramp within its bounds: a settling time a thousand recordings long bends it by 0.05%.
   const std::array<double, kMaxEffectParams> long_settling{0.0, 1.0, 0.0, 1e3 * DataScale{}.duration_s};

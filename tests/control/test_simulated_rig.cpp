@@ -176,6 +176,37 @@ TEST(SimulatedRig, HysteresisMakesUpAndDownSweepsDiffer) {
   EXPECT_NEAR(gap, expected, 0.1 * expected);
 }
 
+TEST(SimulatedRig, AWanderingDriftIsARandomWalkOfTheDiagnosedSizeRestartedByAReset) {
+  // wander 0.3 um/sqrt(s): the change over 1 s has an RMS of 0.3 um, over 4 s of 0.6 um.
+  SimRigConfig c = SimRigConfig{}.exactly(paper_model(2));
+  c.added_effects = {Effect{EffectKind::drift, {0.0, 0.0, 0.0, 0.0, 0.3}}};
+  SimulatedRig rig(c);
+  rig.reset_steady_state(300.0);
+  const double rest_um = rig.true_displacement_um();
+  std::vector<double> y;
+  for (int k = 0; k < 400000; ++k) {  // 400 s at a constant voltage: the plant rests, the drift moves
+    if (k % 1000 == 0) y.push_back(rig.true_displacement_um());
+    rig.apply(300.0);
+  }
+  for (size_t lag : {1u, 4u}) {
+    double sum = 0.0;
+    for (size_t i = lag; i < y.size(); i += lag) sum += (y[i] - y[i - lag]) * (y[i] - y[i - lag]);
+    const double rms = std::sqrt(sum / static_cast<double>(y.size() / lag - 1));
+    // 400 and 100 independent increments: the RMS is within 8% and 15% (one standard error), 25% here.
+    EXPECT_NEAR(rms, 0.3 * std::sqrt(static_cast<double>(lag)), 0.25 * 0.3 * std::sqrt(static_cast<double>(lag)))
+        << "over " << lag << " s";
+  }
+  EXPECT_GT(std::abs(rig.true_displacement_um() - rest_um), 0.0);
+  rig.reset_steady_state(300.0);
+  EXPECT_DOUBLE_EQ(rig.true_displacement_um(), rest_um);  // a reset starts the drift's clock and walk again
+  // Without wander the same drift holds still.
+  c.added_effects[0].p[kDriftWander] = 0.0;
+  SimulatedRig still(c);
+  still.reset_steady_state(300.0);
+  for (int k = 0; k < 5000; ++k) still.apply(300.0);
+  EXPECT_NEAR(still.true_displacement_um(), rest_um, 1e-9);
+}
+
 TEST(SimulatedRig, RejectsBadConfigurationNamingTheKey) {
   auto expect_key = [](SimRigConfig c, const std::string& key) {
     try {

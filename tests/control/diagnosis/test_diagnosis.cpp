@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "control/config_error.hpp"
+#include "control/simulated_rig.hpp"
 #include "tests/control/diagnosis/diagnosis_test_rig.hpp"
 
 namespace pvcgel::control::diagnosis {
@@ -331,6 +332,36 @@ TEST(Diagnose, ADriftOnsetIsFittedInsideTheFitSegmentNotExtrapolatedFromTheHeldO
     }
   EXPECT_TRUE(seen);
   EXPECT_NE(r.verdict, "none") << r.explanation;
+}
+
+TEST(Diagnose, ADriftThatWandersIsNamedDriftWithItsSizeAndRunsInTheSimulatedRig) {
+  // 60 s with a random walk (0.15 um/sqrt(s)) low-passed over 3 s, as a rig warming and cooling: no ramp
+  // or settling curve follows it, a spline through the fitted blocks does.
+  auto s = recording({}, 0.05, 3, 60.0);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> step(0.0, 0.15 * std::sqrt(Ts));
+  double walk = 0.0, smooth = 0.0;
+  for (double& y : s.y_um) {
+    walk += step(rng);
+    smooth += (walk - smooth) * Ts / 3.0;
+    y += smooth;
+  }
+  const auto r = diagnose(paper_model(3), {s});
+  EXPECT_EQ(r.verdict, "drift") << r.explanation;
+  ASSERT_EQ(r.mixture.size(), 1u);
+  EXPECT_EQ(r.mixture.front().kind, EffectKind::drift);
+  const double wander = r.mixture.front().p[kDriftWander];
+  EXPECT_GT(wander, 0.03);  // about the walk's 0.15 um/sqrt(s), less what the 3 s low-pass takes off
+  EXPECT_LT(wander, 0.3);
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um);
+  // The augmented model runs in the simulated rig, which draws a wander of that size.
+  SimRigConfig c = SimRigConfig{}.exactly(paper_model(3));
+  c.added_effects = r.mixture;
+  SimulatedRig rig(c);
+  rig.reset_steady_state(300.0);
+  const double rest_um = rig.true_displacement_um();
+  for (int k = 0; k < 20000; ++k) rig.apply(300.0);
+  EXPECT_GT(std::abs(rig.true_displacement_um() - rest_um), 1e-3);
 }
 
 TEST(HeldOutMask, TheLast3SOfEvery10SAtTheDaemonsRate) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -93,6 +94,43 @@ TEST_F(Projection, AGainBeyondTheToleranceStopsAtItsBound) {
   const auto pred = project(p);
   EXPECT_DOUBLE_EQ(pred.gain, gain_bounds(options).second);
   EXPECT_GT(p.residual({}, Nominal{}).norm(), 1.0);  // the rest of the gain is an error left to explain
+}
+
+TEST(WanderingDrift, TheSplineFollowsASlowWanderThroughTheHeldOutBlocksAndMeasuresItsSize) {
+  // 60 s: six 10 s blocks, the last 3 s of each held out. The wander is smooth on the 10 s scale (periods
+  // of 90 s and 60 s, 1 um), as a thermal drift; a cubic spline knotted every 10 s follows it to ~0.01 um
+  // (a 20 s period would leave ~0.4 um: the spline is for wander slower than the blocks).
+  const HammersteinModel model = paper_model(2);
+  DiagnosisOptions options;
+  Series s;
+  s.sample_time_s = Ts;
+  std::vector<double> wander;
+  for (size_t k = 0; k < 60000; ++k) {
+    const double t = static_cast<double>(k) * Ts;
+    s.t_s.push_back(t);
+    s.u_V.push_back(300.0 + 100.0 * std::sin(2 * M_PI * 0.4 * t) + 40.0 * std::sin(2 * M_PI * 2.3 * t + 1.0));
+    wander.push_back(std::sin(2 * M_PI * t / 90.0) + 0.5 * std::sin(2 * M_PI * t / 60.0 + 1.0));
+  }
+  s.y_um = rig_output(model, s, s.u_V.front(), 1.0, 0.0);
+  for (size_t k = 0; k < s.y_um.size(); ++k) s.y_um[k] += wander[k];
+  const std::vector<Series> data{s};
+  const std::vector<std::vector<char>> held_out{held_out_mask(s.u_V.size(), Ts, options)};
+  Problem p(model, data, held_out, options);
+  p.set_delay(0.0);
+  p.set_initial({s.u_V.front()});
+  const Effect ramp{EffectKind::drift, {}}, wanders{EffectKind::drift, {0.0, 0.0, 0.0, 0.0, 1.0}};
+  const auto without = p.predict({&ramp, 1}, Nominal{}, true);
+  const auto with = p.predict({&wanders, 1}, Nominal{}, true);
+  const auto e_without = errors_of(data, without.y, held_out), e_with = errors_of(data, with.y, held_out);
+  EXPECT_GT(e_without.rmse_validation_um, 0.3);
+  EXPECT_LT(e_with.rmse_validation_um, 0.03);  // interpolated across each held-out 3 s
+  EXPECT_EQ(without.wander_um_per_sqrt_s, 0.0);
+  // Its size: the RMS change of the true wander from knot to knot (every 10 s, and the last sample), over
+  // sqrt(10 s).
+  double sum = 0.0;
+  for (size_t k = 10000; k <= 60000; k += 10000) sum += std::pow(wander[std::min<size_t>(k, 59999)] - wander[k - 10000], 2);
+  const double truth = std::sqrt(sum / 6.0 / 10.0);
+  EXPECT_NEAR(with.wander_um_per_sqrt_s, truth, 0.15 * truth);
 }
 
 }  // namespace
