@@ -353,6 +353,9 @@ TEST(Diagnose, ADriftThatWandersIsNamedDriftWithItsSizeAndRunsInTheSimulatedRig)
   const double wander = r.mixture.front().p[kDriftWander];
   EXPECT_GT(wander, 0.03);  // about the walk's 0.15 um/sqrt(s), less what the 3 s low-pass takes off
   EXPECT_LT(wander, 0.3);
+  // Its offset is each recording's sensor offset, solved by the projection: a drift offset beside it has
+  // no data to fit it and would shift the augmented model's output (it came out at -15 um on a rig).
+  EXPECT_EQ(r.mixture.front().p[0], 0.0);
   EXPECT_LT(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um);
   // The augmented model runs in the simulated rig, which draws a wander of that size.
   SimRigConfig c = SimRigConfig{}.exactly(paper_model(3));
