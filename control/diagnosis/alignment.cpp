@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "control/diagnosis/candidates.hpp"
 #include "control/diagnosis/significance.hpp"
 #include "control/text_format.hpp"
 
@@ -194,7 +195,8 @@ std::optional<DelayChoice> leading_delay(const DiagnosisResult& res, Problem& pr
   std::vector<double> mse(leading.size() * delays.size());
   run_each("leading candidates at other delays", mse.size(), problem, o, [&](size_t i, Problem& own) {
     const auto& c = *leading[i / delays.size()];
-    const FitSpace space({c.effect.kind}, scale, true, o, &data);
+    FitSpace space({c.effect.kind}, scale, true, o, &data);
+    if (const auto f = form_choice(c.effect.kind)) hold_form(space, c.effect.kind, c.effect.p[*f]);  // the form it chose
     own.set_delay(delays[i % delays.size()]);
     double cost = 0.0;
     const auto z = fit_staged(own, space, space.z_of({c.effect}, nominal_of(c)), cost);

@@ -143,8 +143,7 @@ void hold_form(FitSpace& space, EffectKind kind, double value) {
   if (!form) return;
   space.hold(kind, *form, value);
   if (kind == EffectKind::drift && value > 0.0)
-    // Offset, rate, onset, settling: the spline follows them (and the offset is each recording's sensor offset).
-    for (size_t i : {0, 1, 2, 3}) space.hold(kind, i, 0.0);
+    for (size_t i : {1, 2, 3}) space.hold(kind, i, 0.0);  // rate, onset, settling: the spline follows them
 }
 
 namespace {

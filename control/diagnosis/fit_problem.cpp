@@ -43,6 +43,10 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     if (data) add_data_starts(kind, sp, *data);
     // A diagnosed loop must stay compensable (files may hold up to alpha = 1 for the simulated rig).
     if (kind == EffectKind::hysteresis) sp[0].upper = 0.99 * kMaxCompensatedHysteresisAlpha;
+    // A drift's offset is each recording's sensor offset, which the projection solves: fitted, it has no
+    // data of its own and wandered along that flat direction (to -118 um beside a +119 um sensor offset,
+    // fresh drift set case003), which the augmented model then added to the rig's output.
+    if (kind == EffectKind::drift && data) sp[0].lower = sp[0].upper = 0.0, sp[0].fixed = true;
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
   if (time_scale) {
