@@ -317,6 +317,20 @@ TEST(Diagnose, LocatesAMismatchOnlyWhereItIs) {
   EXPECT_EQ(r.verdict, "drift") << r.explanation;
 }
 
+TEST(Diagnose, ADriftsOffsetIsTheSensorOffsetNotAnEffectParameter) {
+  // A ramp from 12 s read through a sensor 20 um off: the offset is each recording's, solved with the other
+  // nuisances; a drift offset beside it has no data of its own and, fitted, wandered off (-118 um beside
+  // a +119 um sensor offset) and shifted the augmented model's output by that much.
+  auto s = recording({EffectKind::drift, {0.0, 0.1, 12.0}}, 0.05);
+  for (double& y : s.y_um) y += 20.0;
+  const auto r = diagnose(paper_model(3), {s});
+  EXPECT_EQ(r.verdict, "drift") << r.explanation;
+  ASSERT_EQ(r.mixture.size(), 1u);
+  EXPECT_EQ(r.mixture.front().p[0], 0.0);
+  ASSERT_EQ(r.alignment.offset_um.size(), 1u);
+  EXPECT_NEAR(r.alignment.offset_um.front(), 20.0, 0.3);
+}
+
 TEST(Diagnose, ADriftOnsetIsFittedInsideTheFitSegmentNotExtrapolatedFromTheHeldOutData) {
   // 14 s, one recording: the last 30% (from 9.8 s) is held out. A drift from 11 s is in the held-out data
   // alone; a drift candidate may not start where nothing fitted it (its ramp would be a guess).
