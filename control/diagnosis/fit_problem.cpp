@@ -142,17 +142,23 @@ size_t Problem::block_length(const std::vector<char>& mask) {
   return std::max<size_t>(static_cast<size_t>(std::find(held, mask.end(), 0) - mask.begin()), 1);
 }
 
-double Problem::wander_size(const std::vector<Basis>& basis, const std::vector<Eigen::VectorXd>& coefficients) const {
+double Problem::wander_size(const std::vector<Basis>& basis,
+                            const std::vector<Eigen::VectorXd>& coefficients) const {
   double sum = 0.0, knots = 0.0;
   for (size_t r = 0; r < data_.size(); ++r) {
     const auto& b = basis[r];
     const auto N = static_cast<size_t>(b.modes.front().size());
+    const double knot_spacing_s = static_cast<double>(block_[r]) * data_[r].sample_time_s;
     double previous = NAN;
-    for (size_t t = 0; t < N + block_[r]; t += block_[r]) {
+    for (size_t t = 0; t < N + block_[r]; t += block_[r]) {  // every knot, and the last sample
+      const auto at_t = static_cast<Eigen::Index>(std::min(t, N - 1));
       double at = 0.0;
       for (size_t j = b.free_modes; j < b.modes.size(); ++j)
-        at += coefficients[r](static_cast<Eigen::Index>(j + 1)) * b.modes[j](static_cast<Eigen::Index>(std::min(t, N - 1)));
-      if (!std::isnan(previous)) sum += (at - previous) * (at - previous) / (static_cast<double>(block_[r]) * data_[r].sample_time_s), knots += 1.0;
+        at += coefficients[r](static_cast<Eigen::Index>(j + 1)) * b.modes[j](at_t);
+      if (!std::isnan(previous)) {
+        sum += (at - previous) * (at - previous) / knot_spacing_s;
+        knots += 1.0;
+      }
       previous = at;
     }
   }
