@@ -196,7 +196,7 @@ std::optional<DelayChoice> leading_delay(const DiagnosisResult& res, Problem& pr
   run_each("leading candidates at other delays", mse.size(), problem, o, [&](size_t i, Problem& own) {
     const auto& c = *leading[i / delays.size()];
     FitSpace space({c.effect.kind}, scale, true, o, &data);
-    if (const auto f = form_choice(c.effect.kind)) hold_form(space, c.effect.kind, c.effect.p[*f]);  // the form it chose
+    hold_form_of(space, c.effect);
     own.set_delay(delays[i % delays.size()]);
     double cost = 0.0;
     const auto z = fit_staged(own, space, space.z_of({c.effect}, nominal_of(c)), cost);

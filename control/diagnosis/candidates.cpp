@@ -146,6 +146,10 @@ void hold_form(FitSpace& space, EffectKind kind, double value) {
     for (size_t i : {1, 2, 3}) space.hold(kind, i, 0.0);  // rate, onset, settling: the spline follows them
 }
 
+void hold_form_of(FitSpace& space, const Effect& fitted) {
+  if (const auto form = form_choice(fitted.kind)) hold_form(space, fitted.kind, fitted.p[*form]);
+}
+
 namespace {
 
 /// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
@@ -211,7 +215,8 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
                       const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
                       const DiagnosisOptions& o) {
   // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
-  // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better.
+  // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better;
+  // a drift's spline always fits better, so the held-out data choose it (drift_form).
   const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
   const bool drift = spaces[0].kinds.front() == EffectKind::drift;
   const size_t v = spaces.size() < 2 ? 0

@@ -99,6 +99,10 @@ inline size_t unused_parameters(std::span<const Effect> effects) {
 /// is its spline alone, without the ramp's parameters beside it.
 void hold_form(FitSpace& space, EffectKind kind, double value);
 
+/// Holds the form that `fitted`'s own fit chose (hold_form), when its kind has a choice of form: a
+/// refit elsewhere (a pair, another delay) keeps a saturation's placement, G's slow pole alone, a spline.
+void hold_form_of(FitSpace& space, const Effect& fitted);
+
 /// Fits `candidates[i]` for every i in `which` from starts[i], each (candidate, space, start) a task.
 void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, const std::vector<size_t>& which,
               const Starts& starts, const std::vector<std::vector<char>>& held_out, Problem& problem,

@@ -122,7 +122,7 @@ Eigen::VectorXd pair_start(size_t start, const PairPlan& plan, const DiagnosisRe
   const auto* fitted_b = fitted_candidate(res, plan.second.kind);
   const Nominal kb = fitted_b ? nominal_of(*fitted_b) : Nominal{};
   FitSpace lead({a.effect.kind}, scale, false, o, &data);
-  if (const auto i = form_choice(a.effect.kind)) hold_form(lead, a.effect.kind, a.effect.p[*i]);
+  hold_form_of(lead, a.effect);
   const auto regrid = coarse_grid(lead, [&](const Effect& x) {
     const std::vector<Effect> e{x, plan.second};
     return problem.residual(e, kb).squaredNorm();
@@ -141,7 +141,7 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
   for (size_t i = 0; i < plans.size(); ++i) {
     spaces.emplace_back(std::vector<EffectKind>{leader.kind, plans[i].second.kind}, scale, true, o, &data);
     for (const Effect& e : {leader, plans[i].second})  // the form its own fit chose
-      if (const auto f = form_choice(e.kind)) hold_form(spaces.back(), e.kind, e.p[*f]);
+      hold_form_of(spaces.back(), e);
     for (size_t s = 0; s < pair_starts(plans[i]); ++s) tasks.emplace_back(i, s);
   }
   std::vector<std::pair<double, Eigen::VectorXd>> fits(tasks.size());
