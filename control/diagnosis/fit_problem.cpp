@@ -46,7 +46,7 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     // A drift's offset is each recording's sensor offset, which the projection solves: fitted, it has no
     // data of its own and wandered along that flat direction (to -118 um beside a +119 um sensor offset,
     // fresh drift set case003), which the augmented model then added to the rig's output.
-    if (kind == EffectKind::drift && data) {
+    if (kind == EffectKind::drift) {
       sp[0].lower = sp[0].upper = 0.0;
       sp[0].fixed = true;
     }
