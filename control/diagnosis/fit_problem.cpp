@@ -43,15 +43,12 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
     if (data) add_data_starts(kind, sp, *data);
     // A diagnosed loop must stay compensable (files may hold up to alpha = 1 for the simulated rig).
     if (kind == EffectKind::hysteresis) sp[0].upper = 0.99 * kMaxCompensatedHysteresisAlpha;
-    // A drift's offset is each recording's sensor offset, which the projection solves: fitted, it has no
-    // data of its own and wandered along that flat direction (to -118 um beside a +119 um sensor offset,
-    // fresh drift set case003), which the augmented model then added to the rig's output.
-    if (kind == EffectKind::drift) {
-      sp[0].lower = sp[0].upper = 0.0;
-      sp[0].fixed = true;
-    }
     specs.insert(specs.end(), sp.begin(), sp.end());
   }
+  // A drift's offset is each recording's sensor offset, which the projection solves: fitted, it has no
+  // data of its own and wandered along that flat direction (to -118 um beside a +119 um sensor offset,
+  // fresh drift set case003), which the augmented model then added to the rig's output.
+  hold(EffectKind::drift, 0, 0.0);
   if (time_scale) {
     const double t = o.time_scale_tolerance;
     const bool loop = std::find(kinds.begin(), kinds.end(), EffectKind::hysteresis) != kinds.end();
