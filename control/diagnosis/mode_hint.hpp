@@ -13,7 +13,7 @@ namespace pvcgel::control::diagnosis::detail {
 
 /// The frequencies (Hz, at most `count`, strongest first) in [f_min_Hz, f_max_Hz] where the residual
 /// y - yhat carries power above the noise `sigma_um` that is a multiple of the prediction's at the same
-/// frequency, a narrow peak of |r(f)| / |yhat(f)| of at least 1: each contiguous fit range of each recording is
+/// frequency, a narrow peak of |r(f)|^2 / |yhat(f)|^2 of at least 0.5: each contiguous fit range of each recording is
 /// Hann-windowed and transformed, and the powers are pooled on a log-frequency grid 1% apart.
 /// The prediction's power in the ratio is guarded by ten times the noise's, so a mode rung by little input
 /// (a tone's leakage, a step) still shows while cells of noise alone do not. Empty when nothing stands out.

@@ -56,19 +56,28 @@ Recording recording(const std::vector<double>& y_um, const std::vector<double>& 
   return {{s}, {yhat}, {held_out_mask(y_um.size(), Ts, o)}};
 }
 
-/// A rig where 5% of the displacement passes through a 37 Hz mode with zeta 0.015 (a participation a
+/// A rig where `share` of the displacement passes through a 37 Hz mode with zeta 0.015 (a participation a
 /// nominal fit misses), against the prediction without it.
-Recording rig_with_a_mode() {
+Recording rig_with_a_mode(double share = 0.05) {
   std::mt19937 rng(7);
   const auto yhat = broadband_prediction(rng);
   const auto mode = through_mode(yhat, 37.0, 0.015);
   std::vector<double> y(yhat.size());
-  for (size_t k = 0; k < y.size(); ++k) y[k] = 0.95 * yhat[k] + 0.05 * mode[k];
+  for (size_t k = 0; k < y.size(); ++k) y[k] = (1.0 - share) * yhat[k] + share * mode[k];
   return recording(y, yhat, rng);
 }
 
 TEST(ModeFrequencyHints, FindALightlyDampedModeTheModelLeftOut) {
   const auto rec = rig_with_a_mode();
+  const auto hints = mode_frequency_hints(rec.data, rec.yhat, rec.held_out, kSigma_um, 0.5, 400.0, 2);
+  ASSERT_FALSE(hints.empty());
+  EXPECT_NEAR(hints.front(), 37.0, 0.02 * 37.0);
+}
+
+TEST(ModeFrequencyHints, FindAModeWhoseErrorAtItsPeakIsBelowThePredictions) {
+  // 2.2% through the mode: at its peak the error is share / (2 zeta) = 0.73 of the prediction, 0.54 in
+  // power, what evaluation case194 (a 34 Hz mode with 2.6% participation on a 5 kHz piezo) left, 0.96.
+  const auto rec = rig_with_a_mode(0.022);
   const auto hints = mode_frequency_hints(rec.data, rec.yhat, rec.held_out, kSigma_um, 0.5, 400.0, 2);
   ASSERT_FALSE(hints.empty());
   EXPECT_NEAR(hints.front(), 37.0, 0.02 * 37.0);
