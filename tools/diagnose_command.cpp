@@ -452,7 +452,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
   for (size_t i = 0; i < recordings.size(); ++i)
     j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
       << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
-  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << number_or_null(cpu) << "\n}\n";
+  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording, 30% of each third of one shorter than 20 s (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << number_or_null(cpu) << "\n}\n";
   return j.str();
 }
 
@@ -601,8 +601,9 @@ void add_diagnose_command(CLI::App& app) {
       "diagnose",
       "Locate the sim-to-real mismatch in recordings, name the missing physics (hysteresis, creep, dead_zone, "
       "saturation, delay, asymmetric_dynamics, slew_limit, resonance, drift, bias_dependent_dynamics), fit it and "
-      "show the improvement on held-out data (the last 3 s of every 10 s of each recording; the last 30 of every "
-      "100 samples on a rig sampled below 10 Hz)");
+      "show the improvement on held-out data (the last 3 s of every 10 s of each recording; 30% of each third of "
+      "a recording shorter than 20 s, neither end held out; the last 30 of every 100 samples on a rig sampled "
+      "below 10 Hz)");
   cmd->add_option("--model", args->model, "TOML file with the [model] table (or a full daemon config)")
       ->required()->check(CLI::ExistingFile);
   cmd->add_option("--json", args->json, "write the machine-readable report to FILE");

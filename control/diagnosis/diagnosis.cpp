@@ -22,9 +22,19 @@ std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) 
   // A block of at least kMinValidationBlockSamples: on a slow rig (a water tank sampled every 4 s) a 10 s
   // block held out every third sample, each between two fitted neighbours, which tests interpolation.
   auto block = std::max(static_cast<size_t>(std::lround(o.validation_block_s / Ts)), kMinValidationBlockSamples);
-  if (n < 2 * block) block = n;
+  std::vector<char> mask(n, 0);
+  if (n < 2 * block && n >= 3 * kMinValidationBlockSamples) {
+    // A short recording: held out at its end, a chirp's highest frequencies or a step's late creep were never
+    // fitted (a 10 kHz chirp's slew limit acted there alone). So 30% of each third, at the first third's end
+    // (the start is fitted), the second's middle and the last's start: neither end is held out.
+    const size_t third = n / 3;
+    const auto held = static_cast<size_t>(std::lround(o.validation_fraction * static_cast<double>(third)));
+    for (size_t at : {third - held, third + (third - held) / 2, 2 * third})
+      std::fill_n(mask.begin() + static_cast<std::ptrdiff_t>(at), held, 1);
+    return mask;
+  }
+  if (n < 2 * block) block = n;  // under 300 samples: its last 30%
   const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(block)));
-  std::vector<char> mask(n);
   for (size_t k = 0; k < n; ++k) mask[k] = (k % block) >= fitted ? 1 : 0;
   return mask;
 }

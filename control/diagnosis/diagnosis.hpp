@@ -63,8 +63,8 @@ struct DiagnosisOptions {
                                       ///< nuisance-only excess explain the data equally well
   double validation_fraction = 0.3;   ///< share of every block held out (its end)
   double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block, a block at least
-                                      ///< kMinValidationBlockSamples long (the whole recording as one block
-                                      ///< when shorter than two blocks)
+                                      ///< kMinValidationBlockSamples long (a recording shorter than two blocks:
+                                      ///< 30% of each third, see held_out_mask)
   double window_s = 1.0;              ///< localisation window
   double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
@@ -189,7 +189,9 @@ struct DiagnosisResult {
   int simulations = 0;
 };
 
-/// Which samples of an n-sample recording are held out (1) rather than fitted (0).
+/// Which samples of an n-sample recording are held out (1) rather than fitted (0): the last 30% of every
+/// block; a recording shorter than two blocks 30% of each third (the first third's end, the second's middle,
+/// the last's start), so neither of its ends is held out.
 std::vector<char> held_out_mask(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
 
 /// Sensor-noise standard deviation from the data: robust (median) scale of

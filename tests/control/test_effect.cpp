@@ -420,7 +420,7 @@ TEST(Effect, ADriftWithoutASettlingTimeIsTheRampOfOlderFiles) {
 TEST(Effect, ADriftOnsetStaysInTheFirstNineTenthsOfTheFitSegment) {
   DataScale d;
   d.duration_s = 14.0;
-  d.fit_end_s = 9.8;  // one recording, the last 30% held out
+  d.fit_end_s = 9.8;  // a recording whose last fitted sample is at 9.8 s
   const auto specs = parameter_specs(EffectKind::drift, d);
   EXPECT_DOUBLE_EQ(specs[2].upper, 0.9 * 9.8);
   for (double start : specs[2].starts) EXPECT_LE(start, specs[2].upper);

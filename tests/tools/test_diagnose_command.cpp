@@ -288,10 +288,12 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsHysteresisAtUnderHalfTheLinea
   EXPECT_LT(r.mixture.front().p[0], kMaxCompensatedHysteresisAlpha);
 }
 
-TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsNotAmbiguousWithADriftThatMatchesOnlyTheHeldOutData) {
-  // With forward_pairs, the pair fits hand the drift a start from which, refitted alone, it steps by 12 um
-  // 0.2 s after the sine's onset: within the ambiguity margin of the loop on held-out data (0.232 against
-  // 0.203 um), but leaving almost three times the loop's excess on the fitting segment, so not "as well".
+TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsNotAmbiguousWithADriftStartedByThePairFits) {
+  // With forward_pairs, the pair fits hand the drift a start from which, refitted alone, it steps after the
+  // sine's onset. With the recording's last 30% held out (until 2026-11-27) that drift came within the
+  // ambiguity margin of the loop on held-out data (0.232 against 0.203 um) and only the fitting segment, where
+  // it left almost three times the loop's excess, kept it from being named as an equal explanation
+  // (`ambiguity_fit_gain`). Held out in three stretches, neither end, it is clearly worse on both segments.
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/piezo_smarthysteresis/";
   auto rig = load_library_case(dir + "linear_model.toml", dir + "piezo_smarthysteresis.csv");
   rig.options.forward_pairs = true;
@@ -300,9 +302,8 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsNotAmbiguousWithADriftThatMat
   const auto drift = std::find_if(r.candidates.begin(), r.candidates.end(),
                                   [](const auto& c) { return c.effect.kind == EffectKind::drift; });
   ASSERT_NE(drift, r.candidates.end());
-  // The premise: the drift matches the loop on held-out data, not on the fitting segment.
   const double s2 = r.noise_sigma_um * r.noise_sigma_um, held_out_base = std::pow(r.nominal_refit.errors.rmse_validation_um, 2) - s2;
-  EXPECT_LE(std::pow(drift->errors.rmse_validation_um, 2) - std::pow(r.candidates.front().errors.rmse_validation_um, 2),
+  EXPECT_GT(std::pow(drift->errors.rmse_validation_um, 2) - std::pow(r.candidates.front().errors.rmse_validation_um, 2),
             control::diagnosis::DiagnosisOptions{}.ambiguity_margin * held_out_base);
   EXPECT_GT(drift->errors.rmse_fit_um, 1.5 * r.candidates.front().errors.rmse_fit_um);
   EXPECT_TRUE(r.ambiguous_with.empty()) << r.explanation;
