@@ -61,7 +61,8 @@ struct DiagnosisOptions {
                                       ///< its tolerance (else it is reported as withheld)
   double ambiguity_margin = 0.1;      ///< candidates whose held-out excess differs by less than this share of the
                                       ///< nuisance-only excess explain the data equally well
-  double validation_fraction = 0.3;   ///< share of every block held out (its end)
+  double validation_fraction = 0.3;   ///< share of every block held out (its end; of each third of a short
+                                      ///< recording, see held_out_mask)
   double validation_block_s = 10.0;   ///< held-out data: the last 30% of every 10 s block, a block at least
                                       ///< kMinValidationBlockSamples long (a recording shorter than two blocks:
                                       ///< 30% of each third, see held_out_mask)
@@ -191,7 +192,7 @@ struct DiagnosisResult {
 
 /// Which samples of an n-sample recording are held out (1) rather than fitted (0): the last 30% of every
 /// block; a recording shorter than two blocks 30% of each third (the first third's end, the second's middle,
-/// the last's start), so neither of its ends is held out.
+/// the last's start), so neither of its ends is held out; one under 3 kMinValidationBlockSamples, its last 30%.
 std::vector<char> held_out_mask(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
 
 /// Sensor-noise standard deviation from the data: robust (median) scale of
