@@ -67,7 +67,7 @@ struct DiagnosisOptions {
                                       ///< kMinValidationBlockSamples long (a recording shorter than two blocks:
                                       ///< 30% of each third, see held_out_mask)
   double window_s = 1.0;              ///< localisation window
-  double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long
+  double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long (the pair test: at most, see pair_block_s)
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
   double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per fitted parameter
