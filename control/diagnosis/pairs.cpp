@@ -4,7 +4,6 @@
 #include <cmath>
 #include <numeric>
 
-
 namespace pvcgel::control::diagnosis::detail {
 
 namespace {
@@ -60,9 +59,11 @@ std::vector<SecondStart> second_effect_starts(const CandidateResult& a, Problem&
   return out;
 }
 
-/// A second effect to fit jointly with the leader (res.candidates.front()) and, for one from the forward
-/// selection that was also fitted alone, its grid point in the leader's residual (a start of its own: a
-/// mode fitted alone at the wrong frequency sits far from the pair's).
+/// A second effect to fit jointly with the leader (res.candidates.front()) and grid points of it in the
+/// leader's residual, each with the nominal refit it was scored with, as starts of their own: for one from
+/// the forward selection that was also fitted alone (a mode fitted alone at the wrong frequency sits far
+/// from the pair's), a mode at the residual's peaks (add_mode_plan) and one at G's nominal time scale
+/// (add_unscaled_plan).
 struct PairPlan {
   Effect second;
   std::vector<SecondStart> grid_seconds;
@@ -162,7 +163,8 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
 /// The starts of a pair: the leader as fitted alone beside the second effect (start 0); the leader
 /// re-gridded beside the second effect (start 1: a leader fitted alone has absorbed part of the second
 /// effect, and the pair's optimum may sit far from it: a hysteresis + creep rig's loop at 0.4x its
-/// alpha); the leader as fitted alone beside the second effect's grid point, when the plan has one.
+/// alpha); the leader as fitted alone beside each of the plan's grid points, at the nominal refit it was
+/// scored with.
 size_t pair_starts(const PairPlan& plan) { return 2 + plan.grid_seconds.size(); }
 
 Eigen::VectorXd pair_start(size_t start, const PairPlan& plan, const DiagnosisResult& res, Problem& problem,
