@@ -1,5 +1,7 @@
 #include "control/transfer_function.hpp"
 
+#include <algorithm>
+
 #include <unsupported/Eigen/Polynomials>
 #include <cmath>
 #include <sstream>
@@ -68,6 +70,11 @@ double TransferFunction::dc_gain() const noexcept { return num_.back() / den_.ba
 
 Eigen::VectorXcd TransferFunction::poles() const { return polynomial_roots(den_); }
 Eigen::VectorXcd TransferFunction::zeros() const { return polynomial_roots(num_); }
+double TransferFunction::slowest_time_constant_s() const {
+  double slowest = 0.0;
+  for (const auto& p : poles()) slowest = std::max(slowest, -1.0 / p.real());
+  return slowest;
+}
 bool TransferFunction::is_stable() const { return (poles().real().array() < 0.0).all(); }
 bool TransferFunction::is_minimum_phase() const { return (zeros().real().array() < 0.0).all(); }
 

@@ -35,6 +35,8 @@ class TransferFunction final {
   [[nodiscard]] Eigen::VectorXcd poles() const;
   /// Roots of num.
   [[nodiscard]] Eigen::VectorXcd zeros() const;
+  /// max -1 / Re(p) over the poles: the slowest mode's time constant (s) of a stable G; 0 without poles.
+  [[nodiscard]] double slowest_time_constant_s() const;
   /// All poles strictly in the open left half plane.
   [[nodiscard]] bool is_stable() const;
   /// All zeros strictly in the open left half plane.

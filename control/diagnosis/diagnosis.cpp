@@ -95,8 +95,7 @@ void check_series(const Series& s, const HammersteinModel& model) {
                                     format("%.6g", dt) + " s, expected " + format("%.6g", Ts) + " s)");
     }
   }
-  double slowest = 0.0;
-  for (const auto& p : model.G.poles()) slowest = std::max(slowest, -1.0 / p.real());
+  const double slowest = model.G.slowest_time_constant_s();
   const double dur = static_cast<double>(n - 1) * Ts;
   // The start state is fitted (G's free-response modes), so a recording need not outlast the start-up
   // transient several times; shorter than one time constant, the start cannot be told from the response.

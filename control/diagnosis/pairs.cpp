@@ -14,7 +14,16 @@ constexpr size_t kPairsTried = 3;  ///< second effects fitted jointly with the l
 /// loop whose refit moved G by 4%: the creep pair it added displaced the loop); case039's delay moved G by 18%.
 constexpr double kTimeScaleMoved = 0.1;
 
-bool can_stand_in_for(EffectKind k, const std::string& parameter);
+/// Whether an effect's fit can imitate a nominal refit parameter that stopped at its tolerance: f's shape
+/// (poly_shape, poly_next_slope) by a static input or output nonlinearity; the gain also by creep's slow
+/// gain; G's time scale by the effects that change the dynamics.
+bool can_stand_in_for(EffectKind k, const std::string& parameter) {
+  using enum EffectKind;
+  const bool static_curve = k == dead_zone || k == saturation;
+  if (parameter == "poly_shape" || parameter == "poly_next_slope") return static_curve;
+  if (parameter == "gain") return static_curve || k == creep;
+  return k == asymmetric_dynamics || k == bias_dependent_dynamics || k == creep || k == resonance || k == delay;
+}
 
 /// A second effect's start: its grid point, and the nominal refit it scored best with.
 struct SecondStart {
@@ -269,10 +278,9 @@ constexpr double kBlockTimeConstants = 10.0;
 /// slew limit + dead zone at the noise against twice the noise for either alone, 3 blocks), 12 of 37
 /// otherwise.
 double pair_block_s(const Problem& problem, Nominal k, const DiagnosisOptions& o) {
-  double slowest_rate = INFINITY;
-  for (const auto& pole : problem.model().G.poles()) slowest_rate = std::min(slowest_rate, std::abs(pole.real()));
-  if (!(slowest_rate > 0.0) || !std::isfinite(slowest_rate)) return o.significance_block_s;
-  return std::min(o.significance_block_s, kBlockTimeConstants * k.time_scale / slowest_rate);
+  const double slowest_s = problem.model().G.slowest_time_constant_s();
+  if (!(slowest_s > 0.0)) return o.significance_block_s;
+  return std::min(o.significance_block_s, kBlockTimeConstants * k.time_scale * slowest_s);
 }
 
 /// Whether both effects of `pair` are named: each significant on held-out data (the pair predicts the
@@ -306,21 +314,6 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
   if (ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   return ok;
 }
-
-namespace {
-
-/// Whether an effect's fit can imitate a nominal refit parameter that stopped at its tolerance: f's shape
-/// (poly_shape, poly_next_slope) by a static input or output nonlinearity; the gain also by creep's slow
-/// gain; G's time scale by the effects that change the dynamics.
-bool can_stand_in_for(EffectKind k, const std::string& parameter) {
-  using enum EffectKind;
-  const bool static_curve = k == dead_zone || k == saturation;
-  if (parameter == "poly_shape" || parameter == "poly_next_slope") return static_curve;
-  if (parameter == "gain") return static_curve || k == creep;
-  return k == asymmetric_dynamics || k == bias_dependent_dynamics || k == creep || k == resonance || k == delay;
-}
-
-}  // namespace
 
 /// A significant pair whose nominal refit stops at its tolerance where the second effect can imitate that
 /// parameter: the nominal model is further off than the refit may move it, and the second effect may

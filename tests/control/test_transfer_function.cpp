@@ -52,6 +52,15 @@ TEST(TransferFunction, PaperGBasicProperties) {
   EXPECT_EQ(paper_model(2).G.den(), G.den());
 }
 
+TEST(TransferFunction, SlowestTimeConstantIsTheSlowestPolesAndZeroWithoutPoles) {
+  // The paper's G: poles -0.5271 and -16.583 rad/s, so 1.897 s.
+  const double disc = std::sqrt(17.11 * 17.11 - 4.0 * 8.76);
+  EXPECT_NEAR(TransferFunction({1.15, 1.03}, {1.0, 17.11, 8.76}).slowest_time_constant_s(), 2.0 / (17.11 - disc), 1e-12);
+  // A lightly damped pair: its envelope's time constant, 1 / (zeta w_n).
+  EXPECT_NEAR(TransferFunction({1.0}, {1.0, 2.0, 101.0}).slowest_time_constant_s(), 1.0, 1e-12);
+  EXPECT_EQ(TransferFunction({2.0}, {1.0}).slowest_time_constant_s(), 0.0);
+}
+
 TEST(TransferFunction, MinimumPhaseStabilityAndDegree) {
   EXPECT_FALSE(TransferFunction({-1.0, 1.0}, {1.0, 3.0, 2.0}).is_minimum_phase());  // zero at +1
   EXPECT_FALSE(TransferFunction({1.0, 0.0}, {1.0, 3.0, 2.0}).is_minimum_phase());   // zero at 0
