@@ -422,6 +422,16 @@ std::string loop_start_json(const CandidateResult& c) {
   return s + "]";
 }
 
+/// How the held-out samples were chosen, one rule for all recordings or one per recording.
+std::string validation_sentence(const DiagnosisResult& r) {
+  const auto& rules = r.held_out_rule;
+  if (std::all_of(rules.begin(), rules.end(), [&](const std::string& x) { return x == rules.front(); }))
+    return "held out (never fitted), in each recording: " + (rules.empty() ? std::string() : rules.front());
+  std::vector<std::string> parts;
+  for (size_t i = 0; i < rules.size(); ++i) parts.push_back("recording " + std::to_string(i) + ": " + rules[i]);
+  return "held out (never fitted): " + join(parts, "; ");
+}
+
 std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::string>& recordings,
                            const std::vector<long>& skipped, double cpu) {
   std::ostringstream j;
@@ -452,7 +462,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
   for (size_t i = 0; i < recordings.size(); ++i)
     j << (i ? ", " : "") << "{\"path\": " << quoted(recordings[i]) << ", \"skipped_rows\": " << skipped[i]
       << ", \"held_out_samples\": " << std::count(r.held_out[i].begin(), r.held_out[i].end(), 1) << "}";
-  j << "],\n  \"validation\": \"held out: the last 30% of every 10 s block of each recording, 30% of each third of one shorter than 20 s (never fitted)\",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << number_or_null(cpu) << "\n}\n";
+  j << "],\n  \"validation\": " << quoted(validation_sentence(r)) << ",\n  \"simulations\": " << r.simulations << ",\n  \"cpu_s\": " << number_or_null(cpu) << "\n}\n";
   return j.str();
 }
 

@@ -18,12 +18,29 @@ namespace pvcgel::control::diagnosis {
 
 using namespace detail;  // NOLINT: the pipeline below is written in the internal stages' terms
 
-std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) {
+namespace {
+
+/// How held_out_mask cuts an n-sample recording: every block's end, 30% of each third, or its end.
+struct HeldOutLayout {
+  enum Shape { kBlocks, kThirds, kTail } shape = kBlocks;
+  size_t block = 0;  ///< samples per block (kBlocks); the block it is shorter than two of (kThirds)
+};
+
+HeldOutLayout held_out_layout(size_t n, double Ts, const DiagnosisOptions& o) {
   // A block of at least kMinValidationBlockSamples: on a slow rig (a water tank sampled every 4 s) a 10 s
   // block held out every third sample, each between two fitted neighbours, which tests interpolation.
-  auto block = std::max(static_cast<size_t>(std::lround(o.validation_block_s / Ts)), kMinValidationBlockSamples);
+  const auto block = std::max(static_cast<size_t>(std::lround(o.validation_block_s / Ts)), kMinValidationBlockSamples);
+  if (n >= 2 * block) return {HeldOutLayout::kBlocks, block};
+  if (n >= 3 * kMinValidationBlockSamples) return {HeldOutLayout::kThirds, block};
+  return {HeldOutLayout::kTail, n};
+}
+
+}  // namespace
+
+std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) {
+  const HeldOutLayout layout = held_out_layout(n, Ts, o);
   std::vector<char> mask(n, 0);
-  if (n < 2 * block && n >= 3 * kMinValidationBlockSamples) {
+  if (layout.shape == HeldOutLayout::kThirds) {
     // A short recording: held out at its end, a chirp's highest frequencies or a step's late creep were never
     // fitted (a 10 kHz chirp's slew limit acted there alone). So 30% of each third, at the first third's end
     // (the start is fitted), the second's middle and the last's start: neither end is held out.
@@ -33,10 +50,23 @@ std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) 
       std::fill_n(mask.begin() + static_cast<std::ptrdiff_t>(at), held, 1);
     return mask;
   }
-  if (n < 2 * block) block = n;  // under 300 samples: its last 30%
+  const size_t block = layout.block;  // under 300 samples (kTail): the recording is one block
   const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(block)));
   for (size_t k = 0; k < n; ++k) mask[k] = (k % block) >= fitted ? 1 : 0;
   return mask;
+}
+
+std::string held_out_rule(size_t n, double Ts, const DiagnosisOptions& o) {
+  const HeldOutLayout layout = held_out_layout(n, Ts, o);
+  const double percent = 100.0 * o.validation_fraction;
+  if (layout.shape == HeldOutLayout::kTail) return format("the last %g%% (a recording under %zu samples)", percent, 3 * kMinValidationBlockSamples);
+  const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(layout.block)));
+  const double block_s = static_cast<double>(layout.block) * Ts;
+  const std::string block = block_s >= 1.0 ? format("%g s", block_s) : format("%zu samples", layout.block);
+  if (layout.shape == HeldOutLayout::kThirds)
+    return format("%g%% of each third, neither end (shorter than two blocks of %s)", percent, block.c_str());
+  if (block_s >= 1.0) return format("the last %g s of every %s block", static_cast<double>(layout.block - fitted) * Ts, block.c_str());
+  return format("the last %zu of every %zu samples", layout.block - fitted, layout.block);
 }
 
 std::string describe_regime(const Series& s, size_t b, size_t e) {
@@ -309,6 +339,14 @@ std::string_view loop_start_name(double branch) noexcept {
 
 namespace {
 
+/// Each recording's held-out mask and its rule in words.
+void hold_out(DiagnosisResult& res, const std::vector<Series>& data, const DiagnosisOptions& o) {
+  for (const auto& s : data) {
+    res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+    res.held_out_rule.push_back(held_out_rule(s.u_V.size(), s.sample_time_s, o));
+  }
+}
+
 /// The `none` test once more with f's shape and next term free to `widened_tolerances` (shape_off names
 /// which stopped at their bound): the diagnosis when the data are none there, else nothing. Adds its
 /// simulations to `simulations` either way.
@@ -317,7 +355,7 @@ std::optional<DiagnosisResult> none_with_a_wider_curve(const HammersteinModel& m
                                                        int& simulations) {
   const DiagnosisOptions o = widened_tolerances(options);
   DiagnosisResult res;
-  for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+  hold_out(res, data, o);
   Problem problem(model, data, res.held_out, o);
   std::optional<SecondPass> no_second;
   (void)align_and_baseline(res, problem, data, o, no_second);
@@ -341,7 +379,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   bool shape_tried = false;  // the `none` test with a wider curve (none_with_a_wider_curve) ran and failed
   for (;;) {
     DiagnosisResult res;
-    for (const auto& s : data) res.held_out.push_back(held_out_mask(s.u_V.size(), s.sample_time_s, o));
+    hold_out(res, data, o);
     Problem problem(model, data, res.held_out, o);
     const DataScale scale = align_and_baseline(res, problem, data, o, second);
     Nominal k;

@@ -185,6 +185,7 @@ struct DiagnosisResult {
   std::vector<MismatchWindow> mismatch;
   std::vector<std::vector<double>> y_baseline_um, y_fitted_um;  ///< per recording
   std::vector<std::vector<char>> held_out;  ///< per recording and sample: 1 when held out (validation)
+  std::vector<std::string> held_out_rule;   ///< per recording: how its held-out samples were chosen (held_out_rule)
   std::vector<double> window_centre_s, window_rms_um;  ///< all windows of all recordings (for plots)
   std::vector<int> window_recording;
   int simulations = 0;
@@ -194,6 +195,9 @@ struct DiagnosisResult {
 /// block; a recording shorter than two blocks 30% of each third (the first third's end, the second's middle,
 /// the last's start), so neither of its ends is held out; one under 3 kMinValidationBlockSamples, its last 30%.
 std::vector<char> held_out_mask(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
+/// held_out_mask's rule for that recording in words, in seconds when a block is at least 1 s: "the last 3 s
+/// of every 10 s block", "the last 30 of every 100 samples", "30% of each third, neither end (...)".
+std::string held_out_rule(size_t n, double sample_time_s, const DiagnosisOptions& options = {});
 
 /// Sensor-noise standard deviation from the data: robust (median) scale of
 /// the second differences of y, which the slow actuator dynamics leave to the noise.

@@ -83,7 +83,8 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
 
   const auto json = read(a.json);
   for (const char* key : {"\"verdict\": \"creep\"", "\"effects\": [", "\"params\": {\"fraction\": ", "\"baseline\": {\"rmse_um\": ",
-                          "\"fitted\": {\"rmse_um\": ", "\"mismatch\": [", "\"rmse_validation_um\": ", "\"skipped_rows\": 3"})
+                          "\"fitted\": {\"rmse_um\": ", "\"mismatch\": [", "\"rmse_validation_um\": ", "\"skipped_rows\": 3",
+                          "\"validation\": \"held out (never fitted), in each recording: the last 3 s of every 10 s block\""})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
 
   std::ifstream pf(a.predict + "0.csv");

@@ -411,6 +411,19 @@ TEST(HeldOutMask, AShortRecordingIsHeldOutInThreeStretchesNeitherEnd) {
   EXPECT_EQ(tiny.back(), 1);
 }
 
+TEST(HeldOutRule, SaysTheRuleTheMaskFollowedInTheRecordingsOwnUnits) {
+  EXPECT_EQ(held_out_rule(25000, 1e-3), "the last 3 s of every 10 s block");
+  EXPECT_EQ(held_out_rule(1024, 4.0), "the last 120 s of every 400 s block");  // 100 samples of a slow rig
+  EXPECT_EQ(held_out_rule(88400, 1e-4), "30% of each third, neither end (shorter than two blocks of 10 s)");
+  EXPECT_EQ(held_out_rule(250, 1e-3), "the last 30% (a recording under 300 samples)");
+  DiagnosisOptions o;
+  o.validation_block_s = 0.05;  // a block under 1 s is counted in samples
+  EXPECT_EQ(held_out_rule(20000, 1e-4, o), "the last 150 of every 500 samples");
+  const auto mask = held_out_mask(20000, 1e-4, o);
+  EXPECT_EQ(mask[349], 0);
+  EXPECT_EQ(mask[350], 1);
+}
+
 TEST(HeldOutMask, ASlowRigHoldsOutStretchesNotSingleSamples) {
   // A water tank sampled every 4 s: a 10 s block would be 3 samples, every third one held out between two
   // fitted neighbours. The block is 100 samples instead: 30 held out in a row.
