@@ -137,6 +137,8 @@ struct HeldOutBlock {
 
 /// Blocks of contiguous held-out samples: a model error is correlated in time, so single samples would
 /// overstate the evidence; blocks of the localisation window are nearly independent for the dynamics here.
+/// A stretch's remnant under half a block joins the stretch's last block: dropped, it can hold most of an
+/// effect's evidence (a slew limit seen in the last second of a held-out stretch).
 std::vector<HeldOutBlock> held_out_blocks(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_a,
                                           const std::vector<std::vector<double>>& y_b,
                                           const std::vector<std::vector<char>>& held_out, double block_s) {
@@ -145,6 +147,7 @@ std::vector<HeldOutBlock> held_out_blocks(const std::vector<Series>& data, const
     const size_t len = std::max<size_t>(10, static_cast<size_t>(std::lround(block_s / data[r].sample_time_s)));
     HeldOutBlock sum;
     size_t n = 0;
+    bool stretch_has_block = false;
     for (size_t k = 0; k <= data[r].y_um.size(); ++k) {
       const bool in = k < data[r].y_um.size() && held_out[r][k];
       if (in) {
@@ -153,8 +156,17 @@ std::vector<HeldOutBlock> held_out_blocks(const std::vector<Series>& data, const
         sum.difference_um2 += (y_a[r][k] - y_b[r][k]) * (y_a[r][k] - y_b[r][k]);
         ++n;
       }
-      if (n > 0 && (n == len || (!in && n >= len / 2)))
-        blocks.push_back({sum.gain_um2 / static_cast<double>(n), sum.difference_um2 / static_cast<double>(n)});
+      const double dn = static_cast<double>(n);
+      if (n > 0 && (n == len || (!in && n >= len / 2))) {
+        blocks.push_back({sum.gain_um2 / dn, sum.difference_um2 / dn});
+        stretch_has_block = true;
+      } else if (n > 0 && !in && stretch_has_block) {
+        HeldOutBlock& last = blocks.back();
+        const double dl = static_cast<double>(len);
+        last.gain_um2 = (last.gain_um2 * dl + sum.gain_um2) / (dl + dn);
+        last.difference_um2 = (last.difference_um2 * dl + sum.difference_um2) / (dl + dn);
+      }
+      if (!in) stretch_has_block = false;
       if (n == len || !in) sum = {}, n = 0;
     }
   }

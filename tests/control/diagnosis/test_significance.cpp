@@ -158,5 +158,21 @@ TEST(HeldOutImprovement, AGainInEveryBlockOfVeryUnequalSizeIsSignificant) {
   EXPECT_DOUBLE_EQ(r.signed_rank_p, std::pow(2.0, -12.0));
 }
 
+TEST(HeldOutImprovement, AStretchsRemnantUnderHalfABlockJoinsItsLastBlock) {
+  // One held-out stretch of 3.3 blocks of 0.5 s; y_a is off by 1 um only in the last 0.15 s. Dropped, that
+  // remnant would leave no difference between the models at all.
+  auto p = two_predictions(0.0, 4);
+  auto& mask = p.held_out[0];
+  const auto& t = p.data[0].t_s;
+  for (size_t k = 0; k < t.size(); ++k) {
+    mask[k] = t[k] >= 2.0 && t[k] < 3.65 - 0.5 * Ts;
+    if (t[k] >= 3.5 && mask[k]) p.y_a[0][k] += 1.0;
+  }
+  const auto r = held_out_improvement(p.data, p.y_a, p.y_b, p.held_out, 0.5, 0.01);
+  // Three blocks, the last of 650 samples holding 150 of 1 um^2: a mean gain of about (150/650)/3 um^2.
+  EXPECT_NEAR(r.mean_um2, 150.0 / 650.0 / 3.0, 0.01);
+  EXPECT_EQ(r.blocks, 3) << "the remnant is part of the third block, not a fourth";
+}
+
 }  // namespace
 }  // namespace pvcgel::control::diagnosis
