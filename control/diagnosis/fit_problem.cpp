@@ -114,6 +114,21 @@ std::vector<Eigen::VectorXd> free_response_modes(const StateSpace& d, Eigen::Ind
   return modes;
 }
 
+/// The samples [0, end) a decaying free-response mode is not negligible on: past its last sample above
+/// 1e-15 of its peak, it adds nothing a double can hold to a sum that includes its peak.
+std::pair<size_t, size_t> free_mode_support(const Eigen::VectorXd& mode) {
+  const double floor = 1e-15 * mode.cwiseAbs().maxCoeff();
+  auto end = static_cast<size_t>(mode.size());
+  while (end > 0 && std::abs(mode(static_cast<Eigen::Index>(end - 1))) <= floor) --end;
+  return {0, end};
+}
+
+/// [first, last) within `support`; empty (first == last) when they do not meet.
+std::pair<size_t, size_t> within(size_t first, size_t last, std::pair<size_t, size_t> support) {
+  const size_t a = std::max(first, support.first), b = std::min(last, support.second);
+  return {a, std::max(a, b)};
+}
+
 /// Uniform cubic B-splines over N samples, knots every `block` samples from sample 0, without the first
 /// (the splines sum to one, and the projection fits an offset of its own).
 std::vector<Eigen::VectorXd> spline_columns(Eigen::Index N, size_t block) {
@@ -129,6 +144,12 @@ std::vector<Eigen::VectorXd> spline_columns(Eigen::Index N, size_t block) {
   }
   columns.erase(columns.begin());
   return columns;
+}
+
+/// Where spline_columns' column c is not zero: four intervals, from two knots before its peak.
+std::pair<size_t, size_t> spline_support(size_t c, size_t block, size_t N) {
+  const size_t first = c >= 2 ? (c - 2) * block : 0;
+  return {std::min(first, N), std::min((c + 2) * block, N)};
 }
 
 }  // namespace
@@ -180,25 +201,38 @@ const std::vector<Problem::Basis>& Problem::basis(double k, bool wander) {
     const auto& s = data_[r];
     const auto d = discretize_zoh(ss, s.sample_time_s);
     Basis b;
-    b.modes = free_response_modes(d, static_cast<Eigen::Index>(s.y_um.size()));
+    const size_t N = s.y_um.size();
+    b.modes = free_response_modes(d, static_cast<Eigen::Index>(N));
     b.free_modes = b.modes.size();
-    if (wander)
-      for (auto& c : spline_columns(static_cast<Eigen::Index>(s.y_um.size()), block_[r])) b.modes.push_back(std::move(c));
+    for (const auto& m : b.modes) b.support.push_back(free_mode_support(m));
+    if (wander) {
+      auto columns = spline_columns(static_cast<Eigen::Index>(N), block_[r]);
+      for (size_t c = 0; c < columns.size(); ++c) {
+        b.modes.push_back(std::move(columns[c]));
+        b.support.push_back(spline_support(c, block_[r], N));
+      }
+    }
     const auto n = static_cast<Eigen::Index>(b.modes.size());
-    // psi = (1, modes): its Gram matrix and psi' y over the fit samples.
+    // psi = (1, modes): its Gram matrix and psi' y over the fit samples, each product over the samples
+    // where both factors can be non-zero (a spline's column spans four blocks of a long recording).
     Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
     Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
+    const auto part = [&](size_t m, std::pair<size_t, size_t> at) {
+      return b.modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
+    };
     for (const auto& [first, last] : fit_ranges_[r]) {
-      const auto len = static_cast<Eigen::Index>(last - first);
-      const auto y = segment(s.y_um, first, last);
-      L(0, 0) += static_cast<double>(len);
-      py(0) += y.sum();
-      for (Eigen::Index c = 0; c < n; ++c) {
-        const auto mc = b.modes[static_cast<size_t>(c)].segment(static_cast<Eigen::Index>(first), len);
-        L(c + 1, 0) += mc.sum();
-        py(c + 1) += mc.dot(y);
-        for (Eigen::Index j = c; j < n; ++j)
-          L(j + 1, c + 1) += mc.dot(b.modes[static_cast<size_t>(j)].segment(static_cast<Eigen::Index>(first), len));
+      L(0, 0) += static_cast<double>(last - first);
+      py(0) += segment(s.y_um, first, last).sum();
+      for (size_t c = 0; c < b.modes.size(); ++c) {
+        const auto at = within(first, last, b.support[c]);
+        if (at.first == at.second) continue;
+        const auto ci = static_cast<Eigen::Index>(c + 1);
+        L(ci, 0) += part(c, at).sum();
+        py(ci) += part(c, at).dot(segment(s.y_um, at.first, at.second));
+        for (size_t j = c; j < b.modes.size(); ++j) {
+          const auto both = within(at.first, at.second, b.support[j]);
+          if (both.first < both.second) L(static_cast<Eigen::Index>(j + 1), ci) += part(c, both).dot(part(j, both));
+        }
       }
     }
     L = L.selfadjointView<Eigen::Lower>();
@@ -222,8 +256,12 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     for (const auto& [first, last] : fit_ranges_[r]) {
       const auto h = segment(yhat[r], first, last);
       ph(0) += h.sum();
-      for (size_t c = 0; c < m.size(); ++c)
-        ph(static_cast<Eigen::Index>(c + 1)) += h.dot(m[c].segment(static_cast<Eigen::Index>(first), h.size()));
+      for (size_t c = 0; c < m.size(); ++c) {
+        const auto [a, e] = within(first, last, basis_r[r].support[c]);
+        if (a < e)
+          ph(static_cast<Eigen::Index>(c + 1)) +=
+              segment(yhat[r], a, e).dot(m[c].segment(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(e - a)));
+      }
       hy += h.dot(segment(data_[r].y_um, first, last));
       hh += h.squaredNorm();
     }
@@ -240,7 +278,11 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     p.offset_um.push_back(c(0));
     Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
     y = (p.gain * y).array() + c(0);
-    for (size_t j = 0; j < m.size(); ++j) y += c(static_cast<Eigen::Index>(j + 1)) * m[j].head(y.size());
+    for (size_t j = 0; j < m.size(); ++j) {
+      const auto [a, e] = within(0, static_cast<size_t>(y.size()), basis_r[r].support[j]);
+      const auto at = static_cast<Eigen::Index>(a), len = static_cast<Eigen::Index>(e - a);
+      y.segment(at, len) += c(static_cast<Eigen::Index>(j + 1)) * m[j].segment(at, len);
+    }
   }
   if (wander) p.wander_um_per_sqrt_s = wander_size(basis_r, coefficients);
   p.y = std::move(yhat);

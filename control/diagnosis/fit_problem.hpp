@@ -225,6 +225,9 @@ class Problem {
   /// pieces of the projection that do not depend on the simulation, so each projection is one pass.
   struct Basis {
     std::vector<Eigen::VectorXd> modes;   ///< free response from each unit state, then the spline's columns
+    /// Per mode, the samples [first, second) outside which it is zero (a spline) or below 1e-15 of its peak
+    /// (a decayed free response): products with it need only these.
+    std::vector<std::pair<size_t, size_t>> support;
     size_t free_modes = 0;                ///< how many of `modes` are G's free response
     Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
     Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
