@@ -357,9 +357,11 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   double x = u;
   if (has(EffectKind::dead_zone)) x = dead_zone(u, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);
   double lag = 0.0;
+  const double step = loop_memory_ * widest_play_V();
   for (size_t i = 0; i < plays_.size(); ++i) {
-    plays_[i] = x - loop_memory_ * play_r_[i];
-    lag += loop_memory_ * play_r_[i];
+    const double trail = std::clamp(step, -play_r_[i], play_r_[i]);
+    plays_[i] = x - trail;
+    lag += trail;
   }
   if (has(EffectKind::hysteresis)) x -= p(EffectKind::hysteresis)[0] * lag / kPlays;
   const double w = nonlinearity(x);

@@ -262,9 +262,13 @@ class AugmentedPlant final {
   /// At rest under constant u (time zero), the play operators on the loop branch set_loop_memory chose.
   void reset_steady_state(double u_V) noexcept;
   /// The hysteresis memory a rest state starts with: 0 virgin (the default), +1 on the rising branch
-  /// (reached from below: each play r_i under the input), -1 on the falling branch, between: partway.
-  /// A recording that starts after a hold at another level or mid-motion does not start virgin.
+  /// (reached from below: each play r_i under the input), -1 on the falling branch; between, the state a
+  /// virgin loop reaches by one step of |branch| times the widest play's width, from below (> 0) or above:
+  /// the plays narrower than the step on the branch, the wider ones displaced by the step. A recording that
+  /// starts after a hold at another level (a single step from it) or mid-motion does not start virgin.
   void set_loop_memory(double branch) noexcept { loop_memory_ = std::clamp(branch, -1.0, 1.0); }
+  /// The hysteresis effect's widest play operator, in volts (0 without one): what set_loop_memory's share is of.
+  [[nodiscard]] double widest_play_V() const noexcept { return *std::max_element(play_r_.begin(), play_r_.end()); }
   /// Displacement now (start of the current cycle).
   [[nodiscard]] double output() const noexcept { return y_; }
   /// Hold u for this cycle and advance one sample.

@@ -413,13 +413,16 @@ std::string extension_json(const DiagnosisResult& r) {
   return j.str();
 }
 
-/// A fitted loop's start branch per recording (", \"loop_start\": [\"virgin\", \"rising\", ...]"), empty otherwise.
+/// A fitted loop's start per recording (", \"loop_start\": [\"virgin\", \"rising\", ...], \"loop_start_share\":
+/// [0, 1, ...]": the share of the widest play the start sits along the branch, + rising, - falling), empty otherwise.
 std::string loop_start_json(const CandidateResult& c) {
   if (c.loop_memory.empty()) return "";
-  std::string s = ", \"loop_start\": [";
-  for (size_t r = 0; r < c.loop_memory.size(); ++r)
-    s += (r ? ", " : "") + quoted(std::string(loop_start_name(c.loop_memory[r])));
-  return s + "]";
+  std::string names, shares;
+  for (size_t r = 0; r < c.loop_memory.size(); ++r) {
+    names += (r ? ", " : "") + quoted(std::string(loop_start_name(c.loop_memory[r])));
+    shares += (r ? ", " : "") + number_or_null(c.loop_memory[r]);
+  }
+  return ", \"loop_start\": [" + names + "], \"loop_start_share\": [" + shares + "]";
 }
 
 /// How the held-out samples were chosen, one rule for all recordings or one per recording.

@@ -104,10 +104,12 @@ Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& fir
   return starts;
 }
 
-/// The branch each recording's loop starts on, one recording at a time (virgin, rising or falling), by the
-/// fit-segment cost at z: a recording that starts after a hold at another level, or mid-motion, starts
-/// part of a loop away from virgin, an offset as large as the loop that no effect parameter can take.
-/// Leaves it set in `problem`; returns whether it changed.
+/// The branch each recording's loop starts on, one recording at a time, by the fit-segment cost at z:
+/// virgin, rising or falling, then partway along the better side (set_loop_memory: a single step from a
+/// hold at another level, the start of a recording made after such a hold), to an eighth of the widest play.
+/// A recording that starts after a hold elsewhere or mid-motion starts part of a loop away from virgin, an
+/// offset as large as the loop that no effect parameter can take. Leaves it set in `problem`; returns
+/// whether it changed.
 bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
   const auto e = space.effects(z);
   const Nominal k = space.g_scale(z);
@@ -116,12 +118,24 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
   const auto before = memory;
   for (size_t r = 0; r < recordings; ++r) {
     double best = INFINITY, chosen = memory[r];
-    for (double branch : {0.0, 1.0, -1.0}) {
-      memory[r] = branch;
+    const auto try_start = [&](double share) {
+      memory[r] = share;
       problem.set_loop_memory(memory);
       const double cost = problem.residual(e, k).squaredNorm();
-      if (cost < best) best = cost, chosen = branch;
+      if (cost < best) best = cost, chosen = share;
+    };
+    for (double branch : {0.0, 1.0, -1.0}) try_start(branch);
+    // Partway: along the better branch's side (from virgin, a quarter of the way to either), then an eighth
+    // either side of the best.
+    if (const double side = chosen; side == 0.0) {
+      try_start(0.25);
+      try_start(-0.25);
+    } else {
+      for (double share : {0.25, 0.5, 0.75}) try_start(std::copysign(share, side));
     }
+    const double centre = chosen;
+    for (double d : {-0.125, 0.125})
+      if (std::abs(centre + d) < 1.0 && centre + d != 0.0) try_start(centre + d);
     memory[r] = chosen;
   }
   problem.set_loop_memory(memory);

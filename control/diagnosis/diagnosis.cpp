@@ -334,7 +334,9 @@ std::vector<std::string> static_curve_off(const NominalRefit& r) {
 }  // namespace
 
 std::string_view loop_start_name(double branch) noexcept {
-  return branch > 0.0 ? "rising" : branch < 0.0 ? "falling" : "virgin";
+  if (branch == 0.0) return "virgin";
+  if (std::abs(branch) < 1.0) return branch > 0.0 ? "partway rising" : "partway falling";
+  return branch > 0.0 ? "rising" : "falling";
 }
 
 namespace {

@@ -113,7 +113,8 @@ struct CandidateResult {
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
   double poly_next = 0.0;  ///< f's added term, as its slope share (see DiagnosisOptions::poly_next_tolerance)
-  /// A loop's start per recording (AugmentedPlant::set_loop_memory: 0 virgin, +1 rising, -1 falling branch),
+  /// A loop's start per recording (AugmentedPlant::set_loop_memory: 0 virgin, +1 rising, -1 falling branch,
+  /// between: partway, by a step of that share of the widest play),
   /// a nuisance chosen with the loop's fit; empty for the other candidates.
   std::vector<double> loop_memory;
   int simulations = 0;
@@ -272,7 +273,8 @@ HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vec
 /// verdict needs at most DiagnosisOptions::explained_excess). NaN when the refit leaves no excess.
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
 
-/// The name of a loop's start branch (CandidateResult::loop_memory): "rising", "falling" or "virgin".
+/// The name of a loop's start (CandidateResult::loop_memory): "rising", "falling", "virgin", or "partway
+/// rising" / "partway falling" (a share of the widest play's width, AugmentedPlant::set_loop_memory).
 std::string_view loop_start_name(double branch) noexcept;
 
 /// Full diagnosis. @throws std::invalid_argument on bad data (see check_series),

@@ -72,13 +72,17 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
   res.alignment.offset_um = pc.offset_um;
 }
 
-/// Where a fitted loop starts, when not virgin: "; the loop starts on the rising branch in recording 0, ...".
+/// Where a fitted loop starts, when not virgin: "; the loop starts on the rising branch in recording 0,
+/// partway (0.38 of the widest play) to the falling branch in recording 1".
 std::string loop_start_text(const CandidateResult& c) {
   std::string s;
-  for (size_t r = 0; r < c.loop_memory.size(); ++r)
-    if (c.loop_memory[r] != 0.0)
-      s += (s.empty() ? "; the loop starts on the " : ", ") + std::string(loop_start_name(c.loop_memory[r])) +
-           " branch in recording " + std::to_string(r);
+  for (size_t r = 0; r < c.loop_memory.size(); ++r) {
+    const double m = c.loop_memory[r];
+    if (m == 0.0) continue;
+    const std::string where = std::abs(m) == 1.0 ? "on the " : format("partway (%.2g of the widest play) to the ", std::abs(m));
+    s += (s.empty() ? "; the loop starts " : ", ") + where + (m > 0.0 ? "rising" : "falling") + " branch in recording " +
+         std::to_string(r);
+  }
   return s;
 }
 

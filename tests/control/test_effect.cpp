@@ -92,6 +92,36 @@ TEST(AugmentedPlant, ALoopStartingOnABranchIsTheStateReachedAlongIt) {
   }
 }
 
+TEST(AugmentedPlant, ALoopStartingPartwayIsTheVirginLoopAfterOneStepOfThatShareOfTheWidestPlay) {
+  // A recording that starts after a hold at another level: the virgin loop at 300 - step, then one step to
+  // 300 V. With the plays' widths spread, a step of a third of the widest play leaves the narrow plays on
+  // the branch and the wide ones displaced by the step.
+  const HammersteinModel unit{OddPolynomial({1.0}), TransferFunction({1.0}, {1e-6, 1.0})};
+  const Effect e{EffectKind::hysteresis, {0.3, 20.0, 1.0}};
+  const double widest = AugmentedPlant(unit, 0.0, Ts, e).widest_play_V();
+  for (double share : {1.0 / 3.0, -0.6}) {
+    AugmentedPlant stepped(unit, 0.0, Ts, e), started(unit, 0.0, Ts, e), full(unit, 0.0, Ts, e);
+    stepped.reset_steady_state(300.0 - share * widest);
+    stepped.apply(300.0);
+    stepped.apply(300.0);
+    started.set_loop_memory(share);
+    started.reset_steady_state(300.0);
+    started.apply(300.0);
+    EXPECT_NEAR(started.output(), stepped.output(), 1e-9) << share;
+    full.set_loop_memory(share > 0.0 ? 1.0 : -1.0);
+    full.reset_steady_state(300.0);
+    full.apply(300.0);
+    EXPECT_GT(std::abs(full.output() - started.output()), 1e-3) << "partway is not the whole branch";
+    double worst = 0.0;
+    for (double u : voltage(3000)) {
+      stepped.apply(u);
+      started.apply(u);
+      worst = std::max(worst, std::abs(started.output() - stepped.output()));
+    }
+    EXPECT_LT(worst, 1e-9) << share;
+  }
+}
+
 TEST(AugmentedPlant, CreepAddsASlowFirstOrderBranch) {
   const double tau = 5.0, fraction = 0.02;
   const auto u = steps(60000, 200.0, 400.0);

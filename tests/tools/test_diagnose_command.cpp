@@ -282,7 +282,8 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsHysteresisAtUnderHalfTheLinea
   ASSERT_FALSE(r.mixture.empty()) << o.summary;
   EXPECT_EQ(r.mixture.front().kind, EffectKind::hysteresis);
   EXPECT_TRUE(r.ambiguous_with.empty()) << o.summary;
-  // The target: held-out RMSE at most half the best linear model's (measured 0.11 against 0.79 um at ce70c0d).
+  // The target: held-out RMSE at most half the best linear model's (measured 0.30 against 0.94 um, the
+  // recording held out in three stretches; 0.11 against 0.79 um at ce70c0d with its last 30% held out).
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.nominal_refit.errors.rmse_validation_um) << o.summary;
   // The diagnosed loop is one the controller can invert exactly (alpha below the compensator's limit).
@@ -345,35 +346,23 @@ TEST(DiagnoseRealRecordings, CascadedTanksIsNeverForcedIntoAPhysicsTheRigDoesNot
   EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
 }
 
-TEST(DiagnoseAmbiguity, ACreepThatLeadsALoopOnlyByAModestFitSegmentMarginLeavesTheLoopNamed) {
+TEST(DiagnoseAmbiguity, ALoopFromAChargedStartLeadsAndTheCreepThatDrawsTheSameLagStaysNamed) {
   // Case 58 of the closed-loop tuning set (tests/data/ambiguous_creep_loop/README.md): a Preisach loop under
-  // closed loop, which a creep and the loop explain equally well on held-out data. The fitting segment puts
-  // the creep first by a margin that orders the two (tie_fit_gain) but does not drop the loop
-  // (ambiguity_fit_gain); with the stricter share set to the tie-break's, the loop is dropped.
+  // closed loop from a charged start (a hold at another level before the recording). Started partway along
+  // its rising branch, the loop explains the held-out data best; a slow creep draws the same lag at these
+  // frequencies and fits the fitting segment as well, so it stays named with the experiment that separates them.
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/ambiguous_creep_loop/";
   auto rig = load_library_case(dir + "model.toml", dir + "rec0.csv");
-  auto& o = rig.options;
-  const auto r = control::diagnosis::diagnose(rig.model.model, rig.series, o);
-  std::vector<std::string> named = r.ambiguous_with;
-  named.push_back(r.verdict);
-  const auto has = [&](const char* k) { return std::find(named.begin(), named.end(), k) != named.end(); };
-  EXPECT_TRUE(has("hysteresis") && has("creep")) << r.explanation;
+  const auto r = control::diagnosis::diagnose(rig.model.model, rig.series, rig.options);
+  EXPECT_EQ(r.verdict, "hysteresis") << r.explanation;
+  EXPECT_EQ(std::count(r.ambiguous_with.begin(), r.ambiguous_with.end(), "creep"), 1) << r.explanation;
   EXPECT_NE(r.separating_experiment.find("hold the voltage constant"), std::string::npos) << r.explanation;
-  // The premise: the verdict leads the other on the fitting segment by more than the tie-break's share.
-  const auto other = std::find_if(r.candidates.begin(), r.candidates.end(), [&](const auto& c) {
-    const auto k = std::string(to_string(c.effect.kind));
-    return (k == "hysteresis" || k == "creep") && k != r.verdict;
-  });
-  ASSERT_NE(other, r.candidates.end());
-  const double s2 = r.noise_sigma_um * r.noise_sigma_um;
-  const double lead_fit = std::pow(r.candidates.front().errors.rmse_fit_um, 2) - s2, other_fit = std::pow(other->errors.rmse_fit_um, 2) - s2;
-  EXPECT_LT(lead_fit, (1.0 - o.tie_fit_gain) * other_fit);
-  EXPECT_GT(lead_fit, (1.0 - o.ambiguity_fit_gain) * other_fit);
-  o.ambiguity_fit_gain = o.tie_fit_gain;
-  const auto strict = control::diagnosis::diagnose(rig.model.model, rig.series, o);
-  EXPECT_EQ(strict.verdict, r.verdict);
-  EXPECT_EQ(std::count(strict.ambiguous_with.begin(), strict.ambiguous_with.end(), std::string(to_string(other->effect.kind))), 0)
-      << strict.explanation;
+  // The loop's start: neither virgin nor a whole branch (the hold before the recording was a single step away).
+  ASSERT_EQ(r.candidates.front().loop_memory.size(), 1u);
+  const double start = r.candidates.front().loop_memory[0];
+  EXPECT_GT(std::abs(start), 0.0);
+  EXPECT_LT(std::abs(start), 1.0);
+  EXPECT_NE(r.explanation.find("partway ("), std::string::npos) << r.explanation;
 }
 
 TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNotNamed) {
@@ -446,18 +435,18 @@ TEST(DiagnoseIndependentSuite, AScoreOverNoCasesSaysSoInsteadOfNan) {
 }
 
 TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) {
-  // The closed-loop Preisach case (tests/data/ambiguous_creep_loop) as a one-case suite labelled, as the
-  // generator labelled it, hysteresis: the verdict (creep) is wrong, the loop is among the ambiguous names.
+  // The closed-loop Preisach case (tests/data/ambiguous_creep_loop) as a one-case suite labelled creep (the
+  // generator labelled it hysteresis): the verdict (the loop) is then wrong, the creep among the ambiguous names.
   namespace fs = std::filesystem;
   const auto suite = temp_dir("ambiguous_suite");
   fs::create_directories(suite / "case000");
   for (const char* f : {"model.toml", "rec0.csv"})
     fs::copy_file(fs::path(PVCGEL_SOURCE_DIR) / "tests/data/ambiguous_creep_loop" / f, suite / "case000" / f,
                   fs::copy_options::overwrite_existing);
-  // With the generator's params column: the loop leaves 2x the noise after a gain and offset refit.
+  // With a params column as the generator writes it: the effect leaves 2x the noise after a gain and offset refit.
   std::ofstream(suite / "labels.csv")
       << "case,effects,dominant,params\n"
-         "case000,hysteresis,hysteresis,\"{\"\"hysteresis\"\":{\"\"ratio_after_gain_offset_refit\"\":2.0}}\"\n";
+         "case000,creep,creep,\"{\"\"creep\"\":{\"\"ratio_after_gain_offset_refit\"\":2.0}}\"\n";
   std::ostringstream log;
   const auto r = run_directory_suite(suite.string(), 1, log);
   const auto text = format_directory_suite(r);
@@ -470,7 +459,7 @@ TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) 
   EXPECT_EQ(r.single_ambiguous, 1) << log.str();
   EXPECT_EQ(r.single_ambiguous_right, 0);
   EXPECT_EQ(r.single_truth_among_ambiguous, 1);
-  EXPECT_NE(log.str().find("ambiguous with: hysteresis"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("ambiguous with: creep"), std::string::npos) << log.str();
   EXPECT_NE(text.find("single effects answered as ambiguous: 1 (the verdict right in 0; the truth among the other names in 1)"),
             std::string::npos) << text;
 }
