@@ -186,6 +186,36 @@ double Problem::wander_size(const std::vector<Basis>& basis,
   return knots > 0.0 ? std::sqrt(sum / knots) : 0.0;
 }
 
+void Problem::solve_gram(Basis& b, const std::vector<double>& y_um, const std::vector<std::pair<size_t, size_t>>& fit_ranges) {
+  // psi = (1, modes): its Gram matrix and psi' y over the fit samples, each product over the samples
+  // where both factors can be non-zero (a spline's column spans four blocks of a long recording).
+  const auto n = static_cast<Eigen::Index>(b.modes.size());
+  Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
+  Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
+  const auto part = [&](size_t m, std::pair<size_t, size_t> at) {
+    return b.modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
+  };
+  for (const auto& [first, last] : fit_ranges) {
+    L(0, 0) += static_cast<double>(last - first);
+    py(0) += segment(y_um, first, last).sum();
+    for (size_t c = 0; c < b.modes.size(); ++c) {
+      const auto at = within(first, last, b.support[c]);
+      if (at.first == at.second) continue;
+      const auto ci = static_cast<Eigen::Index>(c + 1);
+      L(ci, 0) += part(c, at).sum();
+      py(ci) += part(c, at).dot(segment(y_um, at.first, at.second));
+      for (size_t j = c; j < b.modes.size(); ++j) {
+        const auto both = within(at.first, at.second, b.support[j]);
+        if (both.first < both.second) L(static_cast<Eigen::Index>(j + 1), ci) += part(c, both).dot(part(j, both));
+      }
+    }
+  }
+  L = L.selfadjointView<Eigen::Lower>();
+  L.diagonal().array() += 1e-12 * L.diagonal().maxCoeff() + 1e-300;
+  b.gram = L.ldlt();
+  b.data_coefficients = b.gram.solve(py);
+}
+
 const std::vector<Problem::Basis>& Problem::basis(double k, bool wander) {
   for (size_t slot = 0; slot < basis_k_.size(); ++slot)
     if (std::pair{k, wander} == basis_k_[slot]) return basis_[slot];
@@ -212,33 +242,7 @@ const std::vector<Problem::Basis>& Problem::basis(double k, bool wander) {
         b.support.push_back(spline_support(c, block_[r], N));
       }
     }
-    const auto n = static_cast<Eigen::Index>(b.modes.size());
-    // psi = (1, modes): its Gram matrix and psi' y over the fit samples, each product over the samples
-    // where both factors can be non-zero (a spline's column spans four blocks of a long recording).
-    Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
-    Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
-    const auto part = [&](size_t m, std::pair<size_t, size_t> at) {
-      return b.modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
-    };
-    for (const auto& [first, last] : fit_ranges_[r]) {
-      L(0, 0) += static_cast<double>(last - first);
-      py(0) += segment(s.y_um, first, last).sum();
-      for (size_t c = 0; c < b.modes.size(); ++c) {
-        const auto at = within(first, last, b.support[c]);
-        if (at.first == at.second) continue;
-        const auto ci = static_cast<Eigen::Index>(c + 1);
-        L(ci, 0) += part(c, at).sum();
-        py(ci) += part(c, at).dot(segment(s.y_um, at.first, at.second));
-        for (size_t j = c; j < b.modes.size(); ++j) {
-          const auto both = within(at.first, at.second, b.support[j]);
-          if (both.first < both.second) L(static_cast<Eigen::Index>(j + 1), ci) += part(c, both).dot(part(j, both));
-        }
-      }
-    }
-    L = L.selfadjointView<Eigen::Lower>();
-    L.diagonal().array() += 1e-12 * L.diagonal().maxCoeff() + 1e-300;
-    b.gram = L.ldlt();
-    b.data_coefficients = b.gram.solve(py);
+    solve_gram(b, s.y_um, fit_ranges_[r]);
     out.push_back(std::move(b));
   }
   return out;

@@ -232,6 +232,8 @@ class Problem {
     Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
     Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
   };
+  /// Fills `b`'s Gram matrix of (1, modes) over `fit_ranges` and the coefficients that fit y_um alone.
+  static void solve_gram(Basis& b, const std::vector<double>& y_um, const std::vector<std::pair<size_t, size_t>>& fit_ranges);
   const std::vector<Basis>& basis(double k, bool wander);
   /// The length of a held-out mask's blocks (held_out_mask), in samples.
   static size_t block_length(const std::vector<char>& mask);
