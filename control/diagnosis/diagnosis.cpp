@@ -23,16 +23,20 @@ namespace {
 /// How held_out_mask cuts an n-sample recording: every block's end, 30% of each third, or its end.
 struct HeldOutLayout {
   enum Shape { kBlocks, kThirds, kTail } shape = kBlocks;
-  size_t block = 0;  ///< samples per block (kBlocks); the block it is shorter than two of (kThirds)
+  size_t block = 0;   ///< samples per block (kBlocks, kTail); the block it is shorter than two of (kThirds)
+  size_t fitted = 0;  ///< a block's first samples, fitted (kBlocks, kTail)
 };
 
 HeldOutLayout held_out_layout(size_t n, double Ts, const DiagnosisOptions& o) {
   // A block of at least kMinValidationBlockSamples: on a slow rig (a water tank sampled every 4 s) a 10 s
   // block held out every third sample, each between two fitted neighbours, which tests interpolation.
   const auto block = std::max(static_cast<size_t>(std::lround(o.validation_block_s / Ts)), kMinValidationBlockSamples);
-  if (n >= 2 * block) return {HeldOutLayout::kBlocks, block};
-  if (n >= 3 * kMinValidationBlockSamples) return {HeldOutLayout::kThirds, block};
-  return {HeldOutLayout::kTail, n};
+  const auto fitted = [&](size_t b) {
+    return static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(b)));
+  };
+  if (n >= 2 * block) return {HeldOutLayout::kBlocks, block, fitted(block)};
+  if (n >= 3 * kMinValidationBlockSamples) return {HeldOutLayout::kThirds, block, 0};
+  return {HeldOutLayout::kTail, n, fitted(n)};
 }
 
 }  // namespace
@@ -50,9 +54,8 @@ std::vector<char> held_out_mask(size_t n, double Ts, const DiagnosisOptions& o) 
       std::fill_n(mask.begin() + static_cast<std::ptrdiff_t>(at), held, 1);
     return mask;
   }
-  const size_t block = layout.block;  // under 300 samples (kTail): the recording is one block
-  const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(block)));
-  for (size_t k = 0; k < n; ++k) mask[k] = (k % block) >= fitted ? 1 : 0;
+  // Under 300 samples (kTail) the recording is one block.
+  for (size_t k = 0; k < n; ++k) mask[k] = (k % layout.block) >= layout.fitted ? 1 : 0;
   return mask;
 }
 
@@ -60,13 +63,13 @@ std::string held_out_rule(size_t n, double Ts, const DiagnosisOptions& o) {
   const HeldOutLayout layout = held_out_layout(n, Ts, o);
   const double percent = 100.0 * o.validation_fraction;
   if (layout.shape == HeldOutLayout::kTail) return format("the last %g%% (a recording under %zu samples)", percent, 3 * kMinValidationBlockSamples);
-  const auto fitted = static_cast<size_t>(std::lround((1.0 - o.validation_fraction) * static_cast<double>(layout.block)));
+  const size_t held = layout.block - layout.fitted;
   const double block_s = static_cast<double>(layout.block) * Ts;
   const std::string block = block_s >= 1.0 ? format("%g s", block_s) : format("%zu samples", layout.block);
   if (layout.shape == HeldOutLayout::kThirds)
     return format("%g%% of each third, neither end (shorter than two blocks of %s)", percent, block.c_str());
-  if (block_s >= 1.0) return format("the last %g s of every %s block", static_cast<double>(layout.block - fitted) * Ts, block.c_str());
-  return format("the last %zu of every %zu samples", layout.block - fitted, layout.block);
+  if (block_s >= 1.0) return format("the last %g s of every %s block", static_cast<double>(held) * Ts, block.c_str());
+  return format("the last %zu of every %zu samples", held, layout.block);
 }
 
 std::string describe_regime(const Series& s, size_t b, size_t e) {

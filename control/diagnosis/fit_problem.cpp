@@ -192,9 +192,6 @@ void Problem::solve_gram(Basis& b, const std::vector<double>& y_um, const std::v
   const auto n = static_cast<Eigen::Index>(b.modes.size());
   Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n + 1, n + 1);
   Eigen::VectorXd py = Eigen::VectorXd::Zero(n + 1);
-  const auto part = [&](size_t m, std::pair<size_t, size_t> at) {
-    return b.modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
-  };
   for (const auto& [first, last] : fit_ranges) {
     L(0, 0) += static_cast<double>(last - first);
     py(0) += segment(y_um, first, last).sum();
@@ -202,11 +199,11 @@ void Problem::solve_gram(Basis& b, const std::vector<double>& y_um, const std::v
       const auto at = within(first, last, b.support[c]);
       if (at.first == at.second) continue;
       const auto ci = static_cast<Eigen::Index>(c + 1);
-      L(ci, 0) += part(c, at).sum();
-      py(ci) += part(c, at).dot(segment(y_um, at.first, at.second));
+      L(ci, 0) += b.on(c, at).sum();
+      py(ci) += b.on(c, at).dot(segment(y_um, at.first, at.second));
       for (size_t j = c; j < b.modes.size(); ++j) {
         const auto both = within(at.first, at.second, b.support[j]);
-        if (both.first < both.second) L(static_cast<Eigen::Index>(j + 1), ci) += part(c, both).dot(part(j, both));
+        if (both.first < both.second) L(static_cast<Eigen::Index>(j + 1), ci) += b.on(c, both).dot(b.on(j, both));
       }
     }
   }
@@ -261,10 +258,9 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
       const auto h = segment(yhat[r], first, last);
       ph(0) += h.sum();
       for (size_t c = 0; c < m.size(); ++c) {
-        const auto [a, e] = within(first, last, basis_r[r].support[c]);
-        if (a < e)
-          ph(static_cast<Eigen::Index>(c + 1)) +=
-              segment(yhat[r], a, e).dot(m[c].segment(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(e - a)));
+        const auto at = within(first, last, basis_r[r].support[c]);
+        if (at.first < at.second)
+          ph(static_cast<Eigen::Index>(c + 1)) += segment(yhat[r], at.first, at.second).dot(basis_r[r].on(c, at));
       }
       hy += h.dot(segment(data_[r].y_um, first, last));
       hh += h.squaredNorm();
@@ -283,9 +279,9 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
     y = (p.gain * y).array() + c(0);
     for (size_t j = 0; j < m.size(); ++j) {
-      const auto [a, e] = within(0, static_cast<size_t>(y.size()), basis_r[r].support[j]);
-      const auto at = static_cast<Eigen::Index>(a), len = static_cast<Eigen::Index>(e - a);
-      y.segment(at, len) += c(static_cast<Eigen::Index>(j + 1)) * m[j].segment(at, len);
+      const auto at = within(0, static_cast<size_t>(y.size()), basis_r[r].support[j]);
+      y.segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first)) +=
+          c(static_cast<Eigen::Index>(j + 1)) * basis_r[r].on(j, at);
     }
   }
   if (wander) p.wander_um_per_sqrt_s = wander_size(basis_r, coefficients);

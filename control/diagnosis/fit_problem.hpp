@@ -231,6 +231,10 @@ class Problem {
     size_t free_modes = 0;                ///< how many of `modes` are G's free response
     Eigen::LDLT<Eigen::MatrixXd> gram;    ///< of psi = (1, modes) over the fit samples
     Eigen::VectorXd data_coefficients;    ///< gram^-1 sum psi y: offset and modes that fit the data alone
+    /// Mode m over the samples [at.first, at.second).
+    [[nodiscard]] auto on(size_t m, std::pair<size_t, size_t> at) const {
+      return modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
+    }
   };
   /// Fills `b`'s Gram matrix of (1, modes) over `fit_ranges` and the coefficients that fit y_um alone.
   static void solve_gram(Basis& b, const std::vector<double>& y_um, const std::vector<std::pair<size_t, size_t>>& fit_ranges);
