@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
 #include <utility>
@@ -72,44 +73,53 @@ std::string held_out_rule(size_t n, double Ts, const DiagnosisOptions& o) {
   return format("the last %zu of every %zu samples", held, layout.block);
 }
 
-std::string describe_regime(const Series& s, size_t b, size_t e) {
-  if (e <= b) return "";
-  double lo = s.u_V[b], hi = s.u_V[b], sum = 0.0;
-  long rising = 0, falling = 0, reversals = 0;
+namespace {
+
+/// Direction reversals of u over [b, e) by more than `band`, so noise on u (closed loop) does not count.
+long reversals_of(const Series& s, size_t b, size_t e, double band) {
+  long reversals = 0;
   int dir = 0;
   double anchor = s.u_V[b];
-  const auto [mn, mx] = std::minmax_element(s.u_V.begin() + static_cast<std::ptrdiff_t>(b), s.u_V.begin() + static_cast<std::ptrdiff_t>(e));
-  const double band = std::max(1.0, 0.1 * (*mx - *mn));
   for (size_t k = b; k < e; ++k) {
-    lo = std::min(lo, s.u_V[k]);
-    hi = std::max(hi, s.u_V[k]);
-    sum += s.u_V[k];
-    if (k > b) {
-      if (s.u_V[k] > s.u_V[k - 1]) ++rising;
-      else if (s.u_V[k] < s.u_V[k - 1]) ++falling;
-    }
-    // Direction reversals with a band, so noise on u (closed loop) does not count.
-    if (s.u_V[k] > anchor + band) {
-      if (dir < 0) ++reversals;
-      dir = 1;
-      anchor = s.u_V[k];
-    } else if (s.u_V[k] < anchor - band) {
-      if (dir > 0) ++reversals;
-      dir = -1;
-      anchor = s.u_V[k];
-    } else if ((dir > 0 && s.u_V[k] > anchor) || (dir < 0 && s.u_V[k] < anchor)) {
-      anchor = s.u_V[k];
+    const double u = s.u_V[k];
+    if (u > anchor + band || u < anchor - band) {
+      const int now = u > anchor ? 1 : -1;
+      reversals += dir == -now;
+      dir = now;
+      anchor = u;
+    } else if ((dir > 0 && u > anchor) || (dir < 0 && u < anchor)) {
+      anchor = u;
     }
   }
-  const double dur = static_cast<double>(e - b) * s.sample_time_s;
-  const double moving = static_cast<double>(rising + falling);
-  std::string r = "u " + format("%.0f", lo) + ".." + format("%.0f", hi) + " V (mean " +
-                  format("%.0f", sum / static_cast<double>(e - b)) + " V, amplitude " + format("%.0f", (hi - lo) / 2) + " V)";
-  if (moving == 0 || hi - lo < 1.0) return r + ", held";
-  r += ", rising " + format("%.0f", 100.0 * static_cast<double>(rising) / moving) + "% of moving samples";
-  const double f = static_cast<double>(reversals) / (2.0 * dur);
-  r += reversals > 0 ? ", ~" + format("%.2g", f) + " Hz" : (rising > falling ? ", rising ramp/step" : ", falling ramp/step");
-  return r;
+  return reversals;
+}
+
+}  // namespace
+
+std::string describe_regime(const Series& s, size_t b, size_t e) {
+  if (e <= b) return "";
+  // Scaled by the recording: an amplifier's 0-10 V input or a piezo's +-0.15 V reads as well as a kilovolt.
+  const auto [all_lo, all_hi] = std::minmax_element(s.u_V.begin(), s.u_V.end());
+  const double u_abs = std::max(std::abs(*all_lo), std::abs(*all_hi));
+  const int decimals = std::clamp(2 - static_cast<int>(std::floor(std::log10(std::max(*all_hi - *all_lo, 1e-300)))), 0, 9);
+  const auto volts = [&](double v) {  // no "-0.000" for a mean that rounds to zero
+    return format("%.*f", decimals, std::abs(v) < 0.5 * std::pow(10.0, -decimals) ? 0.0 : v);
+  };
+  const auto first = s.u_V.begin() + static_cast<std::ptrdiff_t>(b), last = s.u_V.begin() + static_cast<std::ptrdiff_t>(e);
+  const auto [lo, hi] = std::minmax_element(first, last);
+  long rising = 0, falling = 0;
+  for (size_t k = b + 1; k < e; ++k) {
+    rising += s.u_V[k] > s.u_V[k - 1];
+    falling += s.u_V[k] < s.u_V[k - 1];
+  }
+  std::string r = "u " + volts(*lo) + ".." + volts(*hi) + " V (mean " + volts(std::accumulate(first, last, 0.0) / static_cast<double>(e - b)) +
+                  " V, amplitude " + volts((*hi - *lo) / 2) + " V)";
+  // Under 0.25% of the largest |u| (1 V of 400 V) a window is held: what moves it is noise on u.
+  if (rising + falling == 0 || *hi - *lo < 0.0025 * u_abs) return r + ", held";
+  r += ", rising " + format("%.0f", 100.0 * static_cast<double>(rising) / static_cast<double>(rising + falling)) + "% of moving samples";
+  const long reversals = reversals_of(s, b, e, std::max(0.1 * (*hi - *lo), 0.0025 * u_abs));
+  const double f = static_cast<double>(reversals) / (2.0 * static_cast<double>(e - b) * s.sample_time_s);
+  return r + (reversals > 0 ? ", ~" + format("%.2g", f) + " Hz" : (rising > falling ? ", rising ramp/step" : ", falling ramp/step"));
 }
 
 void check_series(const Series& s, const HammersteinModel& model) {
