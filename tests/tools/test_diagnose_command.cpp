@@ -346,6 +346,26 @@ TEST(DiagnoseRealRecordings, CascadedTanksIsNeverForcedIntoAPhysicsTheRigDoesNot
   EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
 }
 
+TEST(DiagnoseRealRecordings, EmpsFrictionIsADeadZoneNearTheSourcesCoulombFriction) {
+  // A real prismatic drive under position control (tests/data/real/emps_friction, SOURCE.md: the EMPS benchmark,
+  // motor voltage in, the carriage's velocity out by central differences of the encoder). The source documents
+  // viscous and Coulomb friction, F_c = 20.39 N identified by its own script. Against the best linear model (a
+  // first-order G that takes the friction for damping) the friction is a dead zone on the drive: below the
+  // breakaway force the carriage does not move. Measured: dead_zone, 0.694 V = 24.4 N, with a slew limit beside
+  // it; held-out 4.15 against 15.0 mm/s (0.28x; the dead zone alone 0.48x).
+  const auto o = diagnose_real_recordings("emps_friction", {"emps_velocity.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "dead_zone") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  EXPECT_EQ(r.mixture.front().kind, EffectKind::dead_zone) << o.summary;
+  EXPECT_TRUE(r.ambiguous_with.empty()) << o.summary;
+  EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
+  // The threshold in newtons (gtau = 35.15 N/V) within a factor 1.5 of the source's Coulomb friction.
+  constexpr double kGtau_N_per_V = 35.1507, kCoulomb_N = 20.3935;
+  EXPECT_GT(r.mixture.front().p[0] * kGtau_N_per_V, kCoulomb_N / 1.5) << o.summary;
+  EXPECT_LT(r.mixture.front().p[0] * kGtau_N_per_V, kCoulomb_N * 1.5) << o.summary;
+}
+
 TEST(DiagnoseAmbiguity, ALoopFromAChargedStartLeadsAndTheCreepThatDrawsTheSameLagStaysNamed) {
   // Case 58 of the closed-loop tuning set (tests/data/ambiguous_creep_loop/README.md): a Preisach loop under
   // closed loop from a charged start (a hold at another level before the recording). Started partway along
