@@ -315,19 +315,41 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
   return ok;
 }
 
+namespace {
+
+/// Whether the pair explains the held-out data clearly better (by the ambiguity margin of the nuisance-only
+/// excess) than the leader alone with a wider nominal refit: f's terms and the gain to widened_tolerances, G's
+/// time scale to 0.5..2, fitted again from the leader's fit. That refit is what the nominal model's error
+/// could do in the second effect's place; when it does as well, the second effect may be that error.
+bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair, Problem& problem,
+                                const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  DiagnosisOptions wide = widened_tolerances(o);
+  wide.time_scale_tolerance = std::max(o.time_scale_tolerance, 1.0);
+  std::vector<CandidateResult> leader{res.candidates.front()};
+  if (leader[0].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(leader[0].loop_memory);
+  const Starts starts{{start_at(leader[0].effect, leader[0].time_scale, scale, wide, data)}};
+  fit_each("leader with a wider nominal refit", leader, {0}, starts, res.held_out, problem, data, scale, wide);
+  const Excess excess(res);
+  return excess(leader[0].errors) - excess(pair.errors) > o.ambiguity_margin * excess.base;
+}
+
+}  // namespace
+
 /// A significant pair whose nominal refit stops at its tolerance where the second effect can imitate that
 /// parameter: the nominal model is further off than the refit may move it, and the second effect may
 /// stand in for that error. On the tuning set and the ctest subset, three false second effects were dead
 /// zones beside f's shape at its bound; the true second effects at a bound (two delays, a loop) cannot
-/// imitate it. Asked only when the leader alone explains the excess. Records the pair member that is not
-/// the leader as withheld; returns whether it did.
-bool withhold_second(DiagnosisResult& res, const PairFit& pair, const DiagnosisOptions& o) {
+/// imitate it. Asked only when the leader alone explains the excess; the data then decide
+/// (pair_beats_a_wider_nominal). Records the pair member that is not the leader as withheld; returns whether
+/// it did.
+bool withhold_second(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
+                     const DataScale& scale, const DiagnosisOptions& o) {
   const EffectKind lead = res.candidates.front().effect.kind;
   const EffectKind second = pair.effects[0].kind == lead ? pair.effects[1].kind : pair.effects[0].kind;
   std::vector<std::string> bounds;
   for (auto& b : refit_at_bounds_with(pair.gain, pair.nominal, pair.effects, o))
     if (can_stand_in_for(second, b)) bounds.push_back(std::move(b));
-  if (bounds.empty()) return false;
+  if (bounds.empty() || pair_beats_a_wider_nominal(res, pair, problem, data, scale, o)) return false;
   res.withheld_second = std::string(to_string(second));
   res.withheld_at_bounds = std::move(bounds);
   return true;

@@ -39,7 +39,9 @@ std::vector<std::string> refit_at_bounds_with(double gain, Nominal k, std::span<
 bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std::vector<Series>& data,
                 const Excess& excess, const DiagnosisOptions& o);
 
-/// Whether the second effect is withheld because the pair's refit stops where it can stand in for it.
-bool withhold_second(DiagnosisResult& res, const PairFit& pair, const DiagnosisOptions& o);
+/// Whether the second effect is withheld because the pair's refit stops where it can stand in for it, and
+/// the leader alone with a wider nominal refit explains the held-out data about as well as the pair.
+bool withhold_second(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
+                     const DataScale& scale, const DiagnosisOptions& o);
 
 }  // namespace pvcgel::control::diagnosis::detail

@@ -152,7 +152,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   const auto& best = res.candidates.front();
   const bool single_ok = best.fitted && excess.base > 0.0 && excess(best.errors) <= o.explained_excess * excess.base;
   bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
-  if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, o);
+  if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, problem, data, scale, o);
   if (pair_ok) {
     res.fitted = pair.errors;
     set_verdict(res, problem, pair.effects, pair.nominal, o);

@@ -244,14 +244,21 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
 
 /// `pvcgel diagnose` on the committed real recordings tests/data/real/NAME/FILES against that directory's
 /// best linear model (linear_model.toml), quietly, the augmented model in a temporary directory.
-DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vector<std::string>& files) {
-  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/real/" + name + "/";
+/// `pvcgel diagnose` on a committed case: tests/data/CASE/MODEL and its recordings FILES.
+DiagnoseOutcome diagnose_data(const std::string& name, const std::string& model, const std::vector<std::string>& files) {
+  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/" + name + "/";
   DiagnoseArgs a;
-  a.model = dir + "linear_model.toml";
+  a.model = dir + model;
   for (const auto& f : files) a.recordings.push_back(dir + f);
-  a.out = (temp_dir("real_" + name) / "augmented.toml").string();
+  std::string tmp = name;
+  std::replace(tmp.begin(), tmp.end(), '/', '_');
+  a.out = (temp_dir(tmp) / "augmented.toml").string();
   a.quiet = true;
   return run_diagnose(a);
+}
+
+DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vector<std::string>& files) {
+  return diagnose_data("real/" + name, "linear_model.toml", files);
 }
 
 /// A model file and its recordings loaded as `pvcgel diagnose` loads them, with its options, for
@@ -411,17 +418,25 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
 TEST(DiagnoseWithheldSecond, ADriftBesideFsShapeAtItsBoundIsStillNamed) {
   // Case 105 of the evaluation set (tests/data/named_beside_bound/README.md): a resonance and a drift.
   // The pair's f shape stops at its tolerance too, but a drift cannot imitate f's shape, so both are named.
-  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/named_beside_bound/";
-  DiagnoseArgs a;
-  a.model = dir + "model.toml";
-  a.recordings = {dir + "rec0.csv"};
-  a.out = (temp_dir("not_withheld") / "augmented.toml").string();
-  a.quiet = true;
-  const auto o = run_diagnose(a);
+  const auto o = diagnose_data("named_beside_bound", "model.toml", {"rec0.csv"});
   const auto& r = o.result;
   ASSERT_EQ(r.mixture.size(), 2u) << o.summary;
   EXPECT_EQ(r.mixture[0].kind, EffectKind::resonance) << o.summary;
   EXPECT_EQ(r.mixture[1].kind, EffectKind::drift) << o.summary;
+  EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
+  EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
+}
+
+TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWiderNominalCannotDoItsPart) {
+  // Case 214 of the evaluation set (tests/data/pair_beats_wider_nominal/README.md): a dead zone and a
+  // saturation. The pair's f shape stops at its tolerance, where a saturation could imitate the nominal's
+  // error; the dead zone alone with a wider nominal refit explains the held-out data clearly worse than the
+  // pair, so the saturation is named, not withheld.
+  const auto o = diagnose_data("pair_beats_wider_nominal", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  ASSERT_EQ(r.mixture.size(), 2u) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::dead_zone) << o.summary;
+  EXPECT_EQ(r.mixture[1].kind, EffectKind::saturation) << o.summary;
   EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
   EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
 }
