@@ -96,6 +96,23 @@ TEST_F(Projection, AGainBeyondTheToleranceStopsAtItsBound) {
   EXPECT_GT(p.residual({}, Nominal{}).norm(), 1.0);  // the rest of the gain is an error left to explain
 }
 
+TEST_F(Projection, ANegativeAddedTermLeavesFIncreasingPastTheControllersRangeWithRoomToWrite) {
+  // The paper's n = 3 f turns over at 862 V; a controller up to 845 V (2% below, as ident writes it). The
+  // largest negative next term the refit may add keeps f increasing 1% past 845 V: a fit that converged onto
+  // a turnover at 845 V itself was refused by pvcgeld once its file's ten digits had moved it inside.
+  model = paper_model(3);
+  options.f_increasing_up_to_V = 845.0;
+  options.f_increasing_margin = 1.0;  // the controller's range decides, not twice the recorded 440 V
+  Problem p(model, data, held_out, options);
+  const double c = p.next_coefficient(-options.poly_next_tolerance);
+  ASSERT_LT(c, 0.0);
+  const auto f = refit_model(model, 1.0, 1.0, c).f;
+  EXPECT_FALSE(f.first_turnover(1.01 * 845.0).has_value());
+  const auto turn = f.first_turnover(1000.0);
+  ASSERT_TRUE(turn.has_value());
+  EXPECT_LT(*turn, 1.02 * 845.0);  // the limit, not far inside it
+}
+
 TEST(WanderingDrift, TheSplineFollowsASlowWanderThroughTheHeldOutBlocksAndMeasuresItsSize) {
   // 60 s: six 10 s blocks, the last 3 s of each held out. The wander is smooth on the 10 s scale (periods
   // of 90 s and 60 s, 1 um), as a thermal drift; a cubic spline knotted every 10 s follows it to ~0.01 um
