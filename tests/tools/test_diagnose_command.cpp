@@ -415,16 +415,21 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
             std::string::npos);
 }
 
+/// Both effects of a pair named, dominant first, with its nominal refit stopped at f's shape and nothing withheld.
+void expect_both_named_beside_fs_shape_bound(const DiagnoseOutcome& o, EffectKind dominant, EffectKind second) {
+  const auto& r = o.result;
+  ASSERT_EQ(r.mixture.size(), 2u) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, dominant) << o.summary;
+  EXPECT_EQ(r.mixture[1].kind, second) << o.summary;
+  EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
+  EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
+}
+
 TEST(DiagnoseWithheldSecond, ADriftBesideFsShapeAtItsBoundIsStillNamed) {
   // Case 105 of the evaluation set (tests/data/named_beside_bound/README.md): a resonance and a drift.
   // The pair's f shape stops at its tolerance too, but a drift cannot imitate f's shape, so both are named.
-  const auto o = diagnose_data("named_beside_bound", "model.toml", {"rec0.csv"});
-  const auto& r = o.result;
-  ASSERT_EQ(r.mixture.size(), 2u) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::resonance) << o.summary;
-  EXPECT_EQ(r.mixture[1].kind, EffectKind::drift) << o.summary;
-  EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
-  EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
+  expect_both_named_beside_fs_shape_bound(diagnose_data("named_beside_bound", "model.toml", {"rec0.csv"}),
+                                          EffectKind::resonance, EffectKind::drift);
 }
 
 TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWiderNominalCannotDoItsPart) {
@@ -432,13 +437,9 @@ TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWider
   // saturation. The pair's f shape stops at its tolerance, where a saturation could imitate the nominal's
   // error; the dead zone alone with a wider nominal refit explains the held-out data clearly worse than the
   // pair, so the saturation is named, not withheld.
-  const auto o = diagnose_data("pair_beats_wider_nominal", "model.toml", {"rec0.csv", "rec1.csv"});
-  const auto& r = o.result;
-  ASSERT_EQ(r.mixture.size(), 2u) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::dead_zone) << o.summary;
-  EXPECT_EQ(r.mixture[1].kind, EffectKind::saturation) << o.summary;
-  EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
-  EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
+  expect_both_named_beside_fs_shape_bound(
+      diagnose_data("pair_beats_wider_nominal", "model.toml", {"rec0.csv", "rec1.csv"}), EffectKind::dead_zone,
+      EffectKind::saturation);
 }
 
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
