@@ -26,6 +26,17 @@ std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b
 
 std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
 
+std::optional<size_t> slow_pole_only_index(EffectKind kind) noexcept {
+  if (kind == EffectKind::asymmetric_dynamics) return 1;
+  if (kind == EffectKind::bias_dependent_dynamics) return 4;
+  return std::nullopt;
+}
+
+bool moves_slow_pole_only(const Effect& e) noexcept {
+  const auto at = slow_pole_only_index(e.kind);
+  return at && e.p[*at] != 0.0;
+}
+
 bool slowest_pole_is_real(const TransferFunction& G) {
   const auto poles = G.poles();
   if (poles.size() < 2) return false;
@@ -152,7 +163,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       return {{"extra_delay_s", 0.0, d.delay_samples_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
     }
     case EffectKind::asymmetric_dynamics:
-      return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}}};
+      // slow_pole_only as for bias_dependent_dynamics: a gel whose slow (viscoelastic) relaxation alone
+      // depends on the direction of motion, its fast pole not.
+      return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}},
+              {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true}};
     case EffectKind::slew_limit:
       // From a slow amplifier to one that moves the whole recorded span in a tenth of a sample.
       return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, rel(span / Ts, {0.002, 0.01, 0.05, 0.2})}};
@@ -241,14 +255,14 @@ void validate(const Effect& e, double Ts, const std::string& key) {
   }
   if (e.kind == EffectKind::saturation && e.p[2] != 0.0 && e.p[2] != 1.0)
     throw ConfigError(key + ".on_drive", format("must be 0 (on the displacement) or 1 (on the drive), got %g", e.p[2]));
-  if (e.kind == EffectKind::bias_dependent_dynamics && e.p[4] != 0.0 && e.p[4] != 1.0)
+  if (const auto at = slow_pole_only_index(e.kind); at && e.p[*at] != 0.0 && e.p[*at] != 1.0)
     throw ConfigError(key + ".slow_pole_only",
-                      format("must be 0 (all of G's time constants) or 1 (G's slowest pole alone), got %g", e.p[4]));
+                      format("must be 0 (all of G's time constants) or 1 (G's slowest pole alone), got %g", e.p[*at]));
 }
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {
   int count = 0, time_scaling = 0;
-  bool slow_pole_only = false;
+  std::string slow_pole_only;  // the effect that moves G's slow pole alone, if any
   std::array<bool, kEffectKindNames.size()> seen{};
   for (const auto& e : effects) {
     if (e.kind == EffectKind::none) continue;
@@ -257,11 +271,11 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
       throw ConfigError(key, "effect '" + std::string(to_string(e.kind)) + "' given twice");
     seen[static_cast<size_t>(e.kind)] = true;
     time_scaling += e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics;
-    slow_pole_only |= e.kind == EffectKind::bias_dependent_dynamics && e.p[4] != 0.0;
+    if (moves_slow_pole_only(e)) slow_pole_only = std::string(to_string(e.kind));
   }
   // Their poles join G's in one linear block, where G's slow mode is no longer its own.
-  if (slow_pole_only && (seen[static_cast<size_t>(EffectKind::creep)] || seen[static_cast<size_t>(EffectKind::resonance)]))
-    throw ConfigError(key, "bias_dependent_dynamics with slow_pole_only = 1 runs without creep and resonance");
+  if (!slow_pole_only.empty() && (seen[static_cast<size_t>(EffectKind::creep)] || seen[static_cast<size_t>(EffectKind::resonance)]))
+    throw ConfigError(key, slow_pole_only + " with slow_pole_only = 1 runs without creep and resonance");
   if (count > kMaxEffects)
     throw ConfigError(key, "at most " + std::to_string(kMaxEffects) + " effects run together, got " + std::to_string(count));
   if (time_scaling > 1)
@@ -301,8 +315,9 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     scale_grid_ = {1.0};
   }
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
-  const bool slow_only = time_scaling_ == EffectKind::bias_dependent_dynamics && p(EffectKind::bias_dependent_dynamics)[4] != 0.0;
-  const auto slow = slow_only ? slow_mode(ss, model.G, "effect.bias_dependent_dynamics.slow_pole_only") : SlowMode{};
+  const bool slow_only = time_scaling_ != EffectKind::none && moves_slow_pole_only({time_scaling_, p(time_scaling_)});
+  const auto slow =
+      slow_only ? slow_mode(ss, model.G, "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only") : SlowMode{};
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
     if (slow_only) {

@@ -192,9 +192,15 @@ inline constexpr size_t kDriftWander = 4;
 /// log-uniformly over `spread_decades` around tau (log-type creep).
 std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
 
-/// G has a real pole slower than all its others (and at least two): bias_dependent_dynamics may move it alone
-/// (slow_pole_only).
+/// G has a real pole slower than all its others (and at least two): asymmetric or bias-dependent dynamics may
+/// move it alone (slow_pole_only).
 bool slowest_pole_is_real(const TransferFunction& G);
+
+/// Where `kind` keeps its slow_pole_only choice (asymmetric and bias-dependent dynamics), if it has one.
+std::optional<size_t> slow_pole_only_index(EffectKind kind) noexcept;
+
+/// Whether `e` moves G's slowest pole alone (slow_pole_only = 1).
+bool moves_slow_pole_only(const Effect& e) noexcept;
 
 /// G with the linear effects of `effects` folded in (creep branches in parallel,
 /// a structural mode in series), the linear block AugmentedPlant runs; G itself
@@ -233,7 +239,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    the static displacement G(0) f it would give (an amplifier or an actuator force that saturates: the
 ///    displacement then approaches the limit with G's dynamics);
 ///  - delay: extra transport delay (fractional, linear interpolation);
-///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing;
+///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing; slow_pole_only 1: only G's slowest
+///    real pole does, as for bias_dependent_dynamics (a direction-dependent viscoelastic relaxation, the fast
+///    dynamics alike both ways), 0 (the default): all of G's time constants;
 ///  - slew_limit: the amplifier voltage changes at most S V/s;
 ///  - resonance: a structural mode M(s) = w_n^2 / (s^2 + 2 zeta w_n s + w_n^2), in series, G (d + (1 - d) M),
 ///    d the direct fraction (0: a full second-order low-pass; near 1: a mode with a small participation,

@@ -147,7 +147,7 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
 /// The parameter that chooses between forms fitted in spaces of their own (candidate_spaces), if any.
 std::optional<size_t> form_choice(EffectKind kind) {
   if (kind == EffectKind::saturation) return 2;               // on_drive
-  if (kind == EffectKind::bias_dependent_dynamics) return 4;  // slow_pole_only
+  if (const auto at = slow_pole_only_index(kind)) return at;
   if (kind == EffectKind::drift) return kDriftWander;
   return std::nullopt;
 }
@@ -169,8 +169,8 @@ namespace {
 /// The spaces a candidate is fitted in: its own, and for a loop also with the earlier shape
 /// (threshold_spread 0), kept only when the free shape does not fit clearly better: on short or
 /// closed-loop data the free shape otherwise bends to the fit segment alone. A choice of form (a
-/// saturation's placement, bias-dependent dynamics on G's slow pole alone, a drift that wanders) is a
-/// space of its own.
+/// saturation's placement, asymmetric or bias-dependent dynamics on G's slow pole alone, a drift that
+/// wanders) is a space of its own.
 std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, const DiagnosisOptions& o,
                                        const std::vector<Series>& data, const TransferFunction& G) {
   std::vector<FitSpace> spaces{FitSpace({kind}, scale, true, o, &data)};
@@ -178,7 +178,7 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
     spaces.push_back(spaces.front());
     spaces.back().hold(EffectKind::hysteresis, 2, 0.0);  // spread 0
   } else if (const auto form = form_choice(kind);
-             form && (kind != EffectKind::bias_dependent_dynamics || slowest_pole_is_real(G))) {
+             form && (!slow_pole_only_index(kind) || slowest_pole_is_real(G))) {
     spaces.push_back(spaces.front());
     // On the drive; the slow pole alone; a wandering drift (its size set after the fit, from its splines).
     hold_form(spaces.back(), kind, 1.0);
@@ -229,8 +229,8 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
                       const std::vector<std::vector<char>>& held_out, Problem& problem, const std::vector<Series>& data,
                       const DiagnosisOptions& o) {
   // A loop's second space (spread 0) is the simpler one, taken unless the free spread gains; a saturation's
-  // (on the drive) and bias-dependent dynamics' (the slow pole alone) are other forms, taken when they fit better;
-  // a drift's spline always fits better, so the held-out data choose it (drift_form).
+  // (on the drive) and asymmetric or bias-dependent dynamics' (the slow pole alone) are other forms, taken
+  // when they fit better; a drift's spline always fits better, so the held-out data choose it (drift_form).
   const double gain_needed = spaces[0].kinds.front() == EffectKind::hysteresis ? o.hysteresis_shape_min_gain : 0.0;
   const bool drift = spaces[0].kinds.front() == EffectKind::drift;
   const size_t v = spaces.size() < 2 ? 0

@@ -318,6 +318,38 @@ TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneMoveItAndKeepItsGain
   EXPECT_GT(largest_gap_to_all, 0.02 * span_um);  // and it is not the all-poles form
 }
 
+TEST(AugmentedPlant, AsymmetricDynamicsOnTheSlowPoleAloneSlowOnlyItsRelaxation) {
+  // slow_pole_only: in G's modal form r1/(s + p1) + r2/(s + p2), p1 the slow pole, the slow mode alone runs
+  // 1 + kappa times slower while the displacement relaxes (G(0) f below it), its DC gain kept; the fast mode
+  // runs as in G both ways. Reference: that form stepped exactly over each sample (ZOH), the plant's 1-sample
+  // I/O delay.
+  const auto model = paper_model(3);
+  const double kappa = 1.5;
+  const Effect e{EffectKind::asymmetric_dynamics, {kappa, 1.0}};
+  const auto poles = model.G.poles();
+  const double p1 = -std::max(poles(0).real(), poles(1).real()), p2 = -std::min(poles(0).real(), poles(1).real());
+  const auto residue = [&](double p, double other) { return (1.15 * -p + 1.03) / (-p + other); };
+  const double r1 = residue(p1, p2), r2 = residue(p2, p1), dc_gain = model.G.dc_gain();
+  std::vector<double> u(8000, 0.0);
+  for (size_t k = 0; k < u.size(); ++k) u[k] = k < 1000 ? 0.0 : k < 4000 ? 600.0 : 200.0;
+  const auto y = run(e, u, 0.0), y_all = run({EffectKind::asymmetric_dynamics, {kappa}}, u, 0.0);
+  double x1 = 0.0, x2 = 0.0, largest_error = 0.0, largest_gap_to_all = 0.0;
+  for (size_t k = 1; k < u.size(); ++k) {
+    const double y_before = r1 * x1 + r2 * x2, w = model.f(k >= 2 ? u[k - 2] : 0.0);
+    const double N = dc_gain * w < y_before ? 1.0 + kappa : 1.0;
+    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
+    x1 = a1 * x1 + (1.0 - a1) * w / p1;
+    x2 = a2 * x2 + (1.0 - a2) * w / p2;
+    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2)));
+    largest_gap_to_all = std::max(largest_gap_to_all, std::abs(y[k] - y_all[k]));
+  }
+  const double span_um = dc_gain * model.f(600.0);
+  std::printf("asymmetric, slow pole alone: largest error %.2e um against the modal reference, %.3f um from all "
+              "poles slowed (span %.1f um)\n", largest_error, largest_gap_to_all, span_um);
+  EXPECT_LT(largest_error, 1e-6 * span_um);  // two exact discretisations, no interpolation
+  EXPECT_GT(largest_gap_to_all, 0.01 * span_um);  // and it is not the all-poles form
+}
+
 TEST(Effect, OnlyASlowRealPoleMovesAlone) {
   try {
     validate({EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 0.5}}, Ts, "model.effect[0]");
@@ -340,6 +372,31 @@ TEST(Effect, OnlyASlowRealPoleMovesAlone) {
   const std::vector<Effect> with_loop{{EffectKind::bias_dependent_dynamics, {0.2, 0.0, 10.0, 0.0, 1.0}},
                                       {EffectKind::hysteresis, {0.1, 20.0}}};
   EXPECT_NO_THROW(validate_mixture(with_loop, "model.effect"));
+}
+
+TEST(Effect, AsymmetricDynamicsMoveTheSlowPoleAloneUnderTheSameRules) {
+  try {
+    validate({EffectKind::asymmetric_dynamics, {0.2, 0.5}}, Ts, "model.effect[0]");
+    FAIL() << "slow_pole_only = 0.5 accepted";
+  } catch (const ConfigError& err) {
+    EXPECT_EQ(err.key(), "model.effect[0].slow_pole_only");
+  }
+  const HammersteinModel first_order{paper_model(3).f, TransferFunction({5.0}, {0.1, 1.0})};
+  try {
+    AugmentedPlant p(first_order, 1, Ts, {EffectKind::asymmetric_dynamics, {0.2, 1.0}});
+    FAIL() << "a first-order G accepted";
+  } catch (const ConfigError& err) {
+    EXPECT_EQ(err.key(), "effect.asymmetric_dynamics.slow_pole_only");
+  }
+  const std::vector<Effect> with_mode{{EffectKind::asymmetric_dynamics, {0.2, 1.0}}, {EffectKind::resonance, {40.0, 0.1}}};
+  try {
+    validate_mixture(with_mode, "model.effect");
+    FAIL() << "the slow pole alone beside a mode accepted";
+  } catch (const ConfigError& err) {
+    EXPECT_NE(std::string(err.what()).find("asymmetric_dynamics with slow_pole_only = 1"), std::string::npos) << err.what();
+  }
+  const std::vector<Effect> all_poles{{EffectKind::asymmetric_dynamics, {0.2, 0.0}}, {EffectKind::resonance, {40.0, 0.1}}};
+  EXPECT_NO_THROW(validate_mixture(all_poles, "model.effect"));
 }
 
 TEST(AugmentedPlant, RestVoltageInvertsTheSteadyState) {

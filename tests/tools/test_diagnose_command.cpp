@@ -442,6 +442,19 @@ TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWider
       EffectKind::saturation);
 }
 
+TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop) {
+  // A case of the independent generator (tests/data/asymmetric_slow_pole/README.md): the slow mode alone
+  // relaxes 8% slower than it contracts, tracked in closed loop. Scaling all of G's time constants by
+  // direction cannot take it; bias-dependent dynamics on the slow pole alone took it before this form existed.
+  const auto o = diagnose_data("asymmetric_slow_pole", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "asymmetric_dynamics") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::asymmetric_dynamics) << o.summary;
+  EXPECT_EQ(r.mixture[0].p[1], 1.0) << "slow_pole_only\n" << o.summary;
+  EXPECT_GT(r.mixture[0].p[0], 0.0) << "relaxation_slowdown: the relaxation is the slower\n" << o.summary;
+}
+
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   // 11 cases: every effect once and none once (seed fixed); the full suite is `pvcgel bench diagnose`.
   std::ostringstream log;
