@@ -311,10 +311,26 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
     std::swap(res.candidates[0], res.candidates[1]);
 }
 
+/// Puts first the best-ranked candidate that explains the excess (o.explained_excess) when the best-ranked one
+/// does not. The score's penalty per parameter is a share of the whole MSE, the noise included: at the noise
+/// floor it can rank a one-parameter candidate that explains nothing above a richer one that explains most of
+/// the excess (a tuning case of bias-dependent dynamics in closed loop: a delay leaving all of it ranked above
+/// the dynamics leaving a fifth), and the verdict was then `unexplained`.
+void lead_with_an_explanation(DiagnosisResult& res, const DiagnosisOptions& o) {
+  const Excess excess(res);
+  const auto explains = [&](const CandidateResult& c) {
+    return c.fitted && excess.base > 0.0 && excess(c.errors) <= o.explained_excess * excess.base;
+  };
+  if (res.candidates.empty() || explains(res.candidates.front())) return;
+  const auto it = std::find_if(res.candidates.begin(), res.candidates.end(), explains);
+  if (it != res.candidates.end()) std::rotate(res.candidates.begin(), it, std::next(it));
+}
+
 }  // namespace
 
 /// Fitted candidates by penalised score on the judging segment (Excess: held-out unless it carries no
-/// excess), then the rest by evidence; ties broken on the fit segment.
+/// excess), then the rest by evidence; ties broken on the fit segment; a candidate that explains the excess
+/// ahead of those that do not (lead_with_an_explanation).
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   const Excess excess(res);
   for (auto& c : res.candidates)
@@ -324,6 +340,7 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
   });
   break_tie(res, o);
+  lead_with_an_explanation(res, o);
 }
 
 /// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit

@@ -455,6 +455,18 @@ TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop)
   EXPECT_GT(r.mixture[0].p[0], 0.0) << "relaxation_slowdown: the relaxation is the slower\n" << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, ACandidateThatExplainsTheExcessLeadsOneThatDoesNot) {
+  // A case of the independent generator (tests/data/explained_below_a_penalised_leader/README.md): judged on
+  // the fitting segment at the noise floor, the penalised ranking put a delay that explains nothing above
+  // the bias-dependent dynamics that explain most of the excess, and the verdict was `unexplained`.
+  const auto o = diagnose_data("explained_below_a_penalised_leader", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.candidates_judged_on, "fitting_segment") << o.summary;
+  EXPECT_EQ(r.verdict, "bias_dependent_dynamics") << o.summary;
+  ASSERT_FALSE(r.candidates.empty());
+  EXPECT_LE(control::diagnosis::excess_share_left(r, r.candidates.front().errors), 0.5) << o.summary;
+}
+
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   // 11 cases: every effect once and none once (seed fixed); the full suite is `pvcgel bench diagnose`.
   std::ostringstream log;
