@@ -316,11 +316,8 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
 /// floor it can rank a one-parameter candidate that explains nothing above a richer one that explains most of
 /// the excess (a tuning case of bias-dependent dynamics in closed loop: a delay leaving all of it ranked above
 /// the dynamics leaving a fifth), and the verdict was then `unexplained`.
-void lead_with_an_explanation(DiagnosisResult& res, const DiagnosisOptions& o) {
-  const Excess excess(res);
-  const auto explains = [&](const CandidateResult& c) {
-    return c.fitted && excess.base > 0.0 && excess(c.errors) <= o.explained_excess * excess.base;
-  };
+void lead_with_an_explanation(DiagnosisResult& res, const Excess& excess, const DiagnosisOptions& o) {
+  const auto explains = [&](const CandidateResult& c) { return c.fitted && excess.explained_by(c.errors, o); };
   if (res.candidates.empty() || explains(res.candidates.front())) return;
   const auto it = std::find_if(res.candidates.begin(), res.candidates.end(), explains);
   if (it != res.candidates.end()) std::rotate(res.candidates.begin(), it, std::next(it));
@@ -340,7 +337,7 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
   });
   break_tie(res, o);
-  lead_with_an_explanation(res, o);
+  lead_with_an_explanation(res, excess, o);
 }
 
 /// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit

@@ -70,6 +70,10 @@ struct Excess {
     return r * r;
   }
   double operator()(const ModelErrors& e) const { return mse(e) - s2; }
+  /// The verdict's bar: a model with errors `e` leaves at most o.explained_excess of the base excess.
+  bool explained_by(const ModelErrors& e, const DiagnosisOptions& o) const {
+    return base > 0.0 && (*this)(e) <= o.explained_excess * base;
+  }
   /// The ranking score: that MSE with a relative penalty per fitted parameter.
   double score(const ModelErrors& e, size_t parameters, const DiagnosisOptions& o) const {
     return mse(e) * (1.0 + o.penalty_per_parameter * static_cast<double>(parameters));

@@ -139,8 +139,8 @@ void add_unscaled_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res,
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
 /// leader's residual is weak) when not already among them. A forward kind whose own fit cannot run
-/// beside the leader in the form it chose (bias-dependent dynamics on G's slow pole alone beside creep or
-/// a mode) starts from its grid point alone.
+/// beside the leader in the form it chose (asymmetric or bias-dependent dynamics on G's slow pole alone beside
+/// creep or a mode) starts from its grid point alone.
 std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                  const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
@@ -309,7 +309,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
   const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : excess.base; };
   const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) &&
                         std::min(c0, c1) > 0.05 * excess.s2;
-  const bool ok = with_both <= o.explained_excess * excess.base && t0.significant && t1.significant && material;
+  const bool ok = excess.explained_by(pair.errors, o) && t0.significant && t1.significant && material;
   if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
   if (ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   return ok;

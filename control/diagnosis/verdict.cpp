@@ -44,7 +44,7 @@ void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisO
   const auto& best = res.candidates.front();
   for (size_t i = 1; i < res.candidates.size(); ++i) {
     const auto& c = res.candidates[i];
-    if (c.fitted && excess(c.errors) <= o.explained_excess * excess.base &&
+    if (c.fitted && excess.explained_by(c.errors, o) &&
         excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base &&
         !fit_segment_prefers(best, c, res, o, o.ambiguity_fit_gain))
       res.ambiguous_with.emplace_back(to_string(c.effect.kind));
@@ -150,7 +150,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   if (res.candidates.front().fitted && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
   if (std::isfinite(pair.score)) refit_members_alone(res, pair, problem, data, scale, o);
   const auto& best = res.candidates.front();
-  const bool single_ok = best.fitted && excess.base > 0.0 && excess(best.errors) <= o.explained_excess * excess.base;
+  const bool single_ok = best.fitted && excess.explained_by(best.errors, o);
   bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, problem, data, scale, o);
   if (pair_ok) {
