@@ -53,12 +53,18 @@ long mbpoll_value(const std::string& out, int ref) {
   return std::stol(out.substr(pos + key.size()));
 }
 
+/// For tests of what the hardware sees rather than of deadlines: a 10 Hz budget
+/// (30 ms per transaction). Under the full parallel suite on two cores the Python
+/// server can stall past the 6 ms of the 50 Hz config, and one late read is a
+/// timing result, which benchmarks/bench_modbus_io measures and tests must not.
+hal::ModbusConfig functional_config(int port) { return test::plant_modbus_config(port, 0.100); }
+
 }  // namespace
 
 TEST(ModbusBackend, TcpClosedLoopHardwareSeesTheCommandAndTheSensorMoves) {
   const std::string dir = test::scratch_dir("mb_tcp");
   PlantServer server({.journal = dir + "/journal.txt"});
-  hal::ModbusBackend backend(test::plant_modbus_config(server.port()));
+  hal::ModbusBackend backend(functional_config(server.port()));
   EXPECT_EQ(backend.name(), "modbus");
   // Measured, and ordered; how fast is benchmarks/bench_modbus_io's question, not a test's.
   EXPECT_GT(backend.startup_rtt().p50_us, 0.0);
@@ -106,7 +112,7 @@ TEST(ModbusBackend, HighVoltageDisabledHoldsTheAmplifierAtZero) {
 
 TEST(ModbusBackend, MbpollReadsTheSameRegistersAsTheBackend) {
   PlantServer server({});
-  hal::ModbusBackend backend(test::plant_modbus_config(server.port()));
+  hal::ModbusBackend backend(functional_config(server.port()));
   ASSERT_EQ(backend.set_high_voltage(true), HalStatus::ok);
   run_cycles(backend, 50, 400.0);  // 1 s at 400 V: y in the tens of um, rising slowly
   const std::string port = std::to_string(server.port());
@@ -349,7 +355,7 @@ TEST(ModbusBackend, ServerKilledMidRunThenReconnectWritesZeroBeforeAnythingElse)
   const std::string dir = test::scratch_dir("mb_kill");
   PlantServer server({.journal = dir + "/before.txt"});
   const int port = server.port();
-  hal::ModbusBackend backend(test::plant_modbus_config(port));
+  hal::ModbusBackend backend(functional_config(port));
   ASSERT_EQ(backend.set_high_voltage(true), HalStatus::ok);
   run_cycles(backend, 10, 600.0);
   EXPECT_EQ(test::read_journal(dir + "/before.txt").back(), (std::vector<std::string>{"W", "10", "6000"}));
