@@ -492,6 +492,22 @@ TEST(DiagnoseIndependentSuite, AScoreOverNoCasesSaysSoInsteadOfNan) {
   EXPECT_NE(text.find("false alarms on none 1/100 = 1.0% (target <= 2%: ratio 0.50)"), std::string::npos) << text;
 }
 
+TEST(DiagnoseIndependentSuite, TheHeldOutRatioIsAlsoGivenWhereTheHeldOutDataShowTheEffect) {
+  // Evaluation case234: a dead zone seen only in the step from rest (fitting segment); the nominal's held-out
+  // RMSE is the noise, so its ratio stays 1.003 however right the verdict. It is counted, and shown apart.
+  DirectorySuiteResult r;
+  r.cases = r.single_cases = r.single_correct = 3;
+  r.ratios = {0.1, 0.3, 1.003};
+  r.ratios_aligned = {0.1, 0.3, 0.96};
+  r.ratios_held_out_shows_effect = {0.1, 0.3};
+  const auto text = format_directory_suite(r);
+  EXPECT_NE(text.find("worst 1.003 (target <= 0.50: worst/target 2.01)"), std::string::npos) << text;
+  EXPECT_NE(text.find("on the 2 whose held-out data show the effect (nominal held-out RMSE >= 1.5x the noise): worst "
+                      "0.300, 0 above 0.50; the other 1: the held-out blocks fall where the effect does not act"),
+            std::string::npos)
+      << text;
+}
+
 TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) {
   // The closed-loop Preisach case (tests/data/ambiguous_creep_loop) as a one-case suite labelled creep (the
   // generator labelled it hysteresis): the verdict (the loop) is then wrong, the creep among the ambiguous names.
@@ -547,6 +563,7 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   EXPECT_EQ(r.false_alarms, 0);
   EXPECT_GE(r.single_correct, 5);
   for (double ratio : r.ratios) EXPECT_LE(ratio, 0.5);
+  EXPECT_LE(r.ratios_held_out_shows_effect.size(), r.ratios.size());
   // The split by the nuisance refit's bounds counts every right case once, on one side.
   EXPECT_LE(r.refit_at_bound_right, r.refit_at_bound);
   EXPECT_EQ(r.refit_at_bound_right + r.refit_inside_right,
