@@ -333,6 +333,11 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
       rest_B_ = d.B;
     }
     auto& ab = AB_grid_.emplace_back();
+    auto& early = E_grid_.emplace_back();
+    if (delay_fraction_ > 0.0) {
+      const Vector e = discretize_zoh(scaled, (1.0 - delay_fraction_) * Ts).A * discretize_zoh(scaled, delay_fraction_ * Ts).B;
+      for (Eigen::Index r = 0; r < e.size(); ++r) early[static_cast<size_t>(r)] = e(r);
+    }
     const auto n = d.A.rows();
     for (Eigen::Index r = 0; r < n; ++r) {
       for (Eigen::Index c = 0; c < n; ++c) ab[static_cast<size_t>(r * (n + 1) + c)] = d.A(r, c);
@@ -381,6 +386,7 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
   if (has(EffectKind::hysteresis)) x -= p(EffectKind::hysteresis)[0] * lag / kPlays;
   const double w = nonlinearity(x);
   const Vector rest = rest_lu_.solve(rest_B_ * w);
+  w_previous_ = w;
   y_lin_ = D_ * w;
   for (Eigen::Index i = 0; i < rest.size(); ++i) {
     x_[static_cast<size_t>(i)] = rest(i);
@@ -414,19 +420,20 @@ void AugmentedPlant::apply(double u) noexcept {
   delay_line_[head_] = u;
   const size_t mask = delay_line_.size() - 1;
   const auto at = [&](int back) { return delay_line_[(head_ - static_cast<size_t>(back)) & mask]; };
-  const double frac = delay_fraction_;
-  const double x = input_stage(frac > 0.0 ? (1.0 - frac) * at(delay_whole_) + frac * at(delay_whole_ + 1) : at(delay_whole_));
+  // The held value that arrives in this sample (a fractional delay: d into it, the previous one before).
+  const double x = input_stage(at(delay_whole_));
   head_ = (head_ + 1) & mask;
 
-  const double w = nonlinearity(x);
+  const double w = nonlinearity(x), dw = w_previous_ - w;
+  w_previous_ = w;
   if (scale_grid_.size() == 1) {
-    y_lin_ = (this->*linear_step_)(0, 1.0, w);
+    y_lin_ = (this->*linear_step_)(0, 1.0, w, dw);
   } else if (time_scaling_ == EffectKind::asymmetric_dynamics) {
-    y_lin_ = (this->*linear_step_)(static_cast<size_t>(time_scale(w)), 1.0, w);
+    y_lin_ = (this->*linear_step_)(static_cast<size_t>(time_scale(w)), 1.0, w, dw);
   } else {
     // Interpolate between the two neighbouring discretisations (log-spaced grid).
     const double pos = std::clamp(20.0 + std::log(time_scale(w)) * kGridStepsPerLog, 0.0, 39.999);
-    y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w);
+    y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
   }
   swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
   y_op_ += op_gain_ * (y_lin_ - y_op_);
@@ -435,17 +442,19 @@ void AugmentedPlant::apply(double u) noexcept {
 }
 
 template <int N>
-double AugmentedPlant::linear_step(size_t i, double weight, double w) noexcept {
+double AugmentedPlant::linear_step(size_t i, double weight, double w, double dw) noexcept {
   std::array<double, N> next{};
-  const auto accumulate = [&](const std::array<double, kMaxOrder*(kMaxOrder + 1)>& ab, double share) {
+  const auto accumulate = [&](size_t g, double share) {
+    const auto& ab = AB_grid_[g];
+    const auto& e = E_grid_[g];
     for (int r = 0; r < N; ++r) {
-      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w;
+      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w + e[static_cast<size_t>(r)] * dw;
       for (int c = 0; c < N; ++c) v += ab[static_cast<size_t>(r * (N + 1) + c)] * x_[static_cast<size_t>(c)];
       next[static_cast<size_t>(r)] += share * v;
     }
   };
-  accumulate(AB_grid_[i], weight);
-  if (weight < 1.0) accumulate(AB_grid_[i + 1], 1.0 - weight);
+  accumulate(i, weight);
+  if (weight < 1.0) accumulate(i + 1, 1.0 - weight);
   double y = D_ * w;
   for (int r = 0; r < N; ++r) {
     x_[static_cast<size_t>(r)] = next[static_cast<size_t>(r)];

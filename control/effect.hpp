@@ -238,7 +238,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
 ///    the static displacement G(0) f it would give (an amplifier or an actuator force that saturates: the
 ///    displacement then approaches the limit with G's dynamics);
-///  - delay: extra transport delay (fractional, linear interpolation);
+///  - delay: extra transport delay, fractional too: the held command switches d samples into a sample
+///    period, so G's state takes the old held value's drive over d Ts and the new one's over (1 - d) Ts
+///    (exact for a held command, ZOH with a delayed switch; D takes the new value);
 ///  - asymmetric_dynamics: G runs (1 + kappa) times slower while relaxing; slow_pole_only 1: only G's slowest
 ///    real pole does, as for bias_dependent_dynamics (a direction-dependent viscoelastic relaxation, the fast
 ///    dynamics alike both ways), 0 (the default): all of G's time constants;
@@ -260,7 +262,7 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:
-  /// @param io_delay_samples  the I/O delay, whole or fractional samples (linear interpolation)
+  /// @param io_delay_samples  the I/O delay, whole or fractional samples (exact for a held command, as the delay effect)
   /// @throws ConfigError if G is unstable or improper, or parameters are out of bounds.
   AugmentedPlant(const HammersteinModel& model, double io_delay_samples, double sample_time_s,
                  std::span<const Effect> effects);
@@ -303,12 +305,13 @@ class AugmentedPlant final {
   }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
   [[nodiscard]] double time_scale(double w) const noexcept;
-  /// x <- weight (A_i x + B_i w) + (1 - weight) (A_{i+1} x + B_{i+1} w): one grid entry, or two
-  /// interpolated; returns C x + D w. For the linear block's order N, chosen once at construction (with N a
-  /// constant the compiler unrolls the step; a runtime order cost the diagnosis half its simulation time).
+  /// x <- weight (A_i x + B_i w + E_i dw) + (1 - weight) (A_{i+1} x + B_{i+1} w + E_{i+1} dw): one grid entry,
+  /// or two interpolated; returns C x + D w. dw is the previous drive minus w, E its share of the sample (the
+  /// fractional delay's, zero without one). For the linear block's order N, chosen once at construction
+  /// (with N a constant the compiler unrolls the step; a runtime order cost the diagnosis half its simulation time).
   template <int N>
-  double linear_step(size_t i, double weight, double w) noexcept;
-  using LinearStep = double (AugmentedPlant::*)(size_t, double, double) noexcept;
+  double linear_step(size_t i, double weight, double w, double dw) noexcept;
+  using LinearStep = double (AugmentedPlant::*)(size_t, double, double, double) noexcept;
   static const std::array<LinearStep, kMaxOrder + 1> kLinearSteps;
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
@@ -329,6 +332,10 @@ class AugmentedPlant final {
   // a grid of time scales when the effect changes the time scale.
   /// Per grid entry, [A | B] row-major, as linear_step reads it.
   std::vector<std::array<double, kMaxOrder*(kMaxOrder + 1)>> AB_grid_;
+  /// Per grid entry, E = e^{A (1 - d) Ts} int_0^{d Ts} e^{A s} ds B: the drive the previous held value gives over
+  /// the first d of a sample, d the delay's fraction (zero without one).
+  std::vector<std::array<double, kMaxOrder>> E_grid_;
+  double w_previous_ = 0.0;  ///< the drive of the held value before the current one (fractional delay)
   std::vector<double> scale_grid_;
   std::array<double, kMaxOrder> C_{};
   double D_ = 0.0;
@@ -342,7 +349,7 @@ class AugmentedPlant final {
   std::vector<double> delay_line_;
   size_t head_ = 0;
   int delay_whole_ = 1;          ///< the I/O delay plus the delay effect, in samples: whole part
-  double delay_fraction_ = 0.0;  ///< and the fraction (the command between two samples)
+  double delay_fraction_ = 0.0;  ///< and the fraction (where in a sample the held command switches)
   std::array<double, kPlays> plays_{};
   std::array<double, kPlays> play_r_{};  ///< the hysteresis effect's play thresholds
   double slew_state_ = 0.0;

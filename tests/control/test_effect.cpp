@@ -10,6 +10,7 @@
 #include "control/config_error.hpp"
 #include "control/config/effect_config.hpp"
 #include "control/simulated_rig.hpp"
+#include "control/state_space.hpp"
 
 namespace pvcgel::control::diagnosis {
 namespace {
@@ -199,6 +200,33 @@ TEST(AugmentedPlant, ADelayLongerThanTheFittedRangeRunsAtTheLoopRate) {
   for (size_t k = 700; k < u.size(); ++k) ASSERT_NEAR(y[k], y0[k - 664], 1e-6) << k;
   const auto half = run({EffectKind::delay, {0.6645}}, u, u[0]);  // half a sample more: the mean of two
   for (size_t k = 700; k < u.size(); ++k) ASSERT_NEAR(half[k], 0.5 * (y0[k - 664] + y0[k - 665]), 0.05) << k;
+}
+
+TEST(AugmentedPlant, AFractionalDelayIsExactForAHeldCommand) {
+  // The command held over each sample reaches the gel (1 + d) samples later, so it switches d into a
+  // sample period. Reference: the same f and G stepped exactly on a grid ten times finer, where the
+  // switch falls on a grid point (d = 0.4, 0.7). (Before, the command was interpolated linearly between
+  // two samples ahead of f and G: a first-order approximation.)
+  const HammersteinModel m = paper_model(3);
+  const auto u = voltage(3000);
+  const int sub = 10;
+  const StateSpace fine = discretize_zoh(realize(m.G, "G"), Ts / sub);
+  for (double d : {0.4, 0.7}) {
+    AugmentedPlant plant(m, 1.0 + d, Ts, std::span<const Effect>{});
+    plant.reset_steady_state(u[0]);
+    Eigen::VectorXd x = (Eigen::MatrixXd::Identity(fine.A.rows(), fine.A.cols()) - fine.A).lu().solve(fine.B * m.f(u[0]));
+    const auto held = [&](long j) {  // the command the gel sees over fine step j (time j Ts / sub)
+      const long k = static_cast<long>(std::floor((static_cast<double>(j) / sub - 1.0 - d) + 1e-9));
+      return u[static_cast<size_t>(std::clamp(k, 0L, static_cast<long>(u.size()) - 1))];
+    };
+    double worst = 0.0;
+    for (size_t k = 0; k < u.size(); ++k) {
+      worst = std::max(worst, std::abs(plant.output() - (fine.C.dot(x) + fine.D * m.f(held(static_cast<long>(k) * sub)))));
+      plant.apply(u[k]);
+      for (int j = 0; j < sub; ++j) x = fine.A * x + fine.B * m.f(held(static_cast<long>(k) * sub + j));
+    }
+    EXPECT_LT(worst, 1e-9) << "d " << d;
+  }
 }
 
 TEST(AugmentedPlant, AsymmetricDynamicsSlowsTheRelaxation) {

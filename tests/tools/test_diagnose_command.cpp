@@ -467,6 +467,17 @@ TEST(DiagnoseIndependentCases, ACandidateThatExplainsTheExcessLeadsOneThatDoesNo
   EXPECT_LE(control::diagnosis::excess_share_left(r, r.candidates.front().errors), 0.5) << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
+  // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
+  // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
+  const auto o = diagnose_data("fractional_delay", "model.toml", {"rec0.csv", "rec1.csv", "rec2.csv", "rec3.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "delay") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::delay) << o.summary;
+  EXPECT_NEAR(r.mixture[0].p[0], 0.005, 0.001) << "extra_delay_s: half a sample, beyond the declared one\n" << o.summary;
+}
+
 TEST(DiagnoseBlindSuite, FixedSubsetMeetsTheIssueThresholds) {
   // 11 cases: every effect once and none once (seed fixed); the full suite is `pvcgel bench diagnose`.
   std::ostringstream log;
