@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <iosfwd>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -76,6 +77,9 @@ struct DirectorySuiteResult {
   /// cases the nuisance-only refit cannot simply absorb.
   static constexpr double kVisibleAfterRefit = 1.5;
   int visible_single_cases = 0, visible_single_correct = 0, visible_mixture_cases = 0, visible_mixture_both_named = 0;
+  /// Single effects by the labels' `form` column (the generator's own form of the effect, when the labels
+  /// have one), as "effect/form": {right, cases}. Which forms the candidates miss, without reading the labels.
+  std::map<std::string, std::array<int, 2>> single_by_form;
 };
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;

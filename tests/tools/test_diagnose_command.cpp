@@ -519,6 +519,20 @@ TEST(DiagnoseIndependentSuite, TheHeldOutRatioIsAlsoGivenWhereTheHeldOutDataShow
       << text;
 }
 
+TEST(DiagnoseIndependentSuite, SingleEffectsAreCountedByTheLabelsFormTheWeakestFirst) {
+  DirectorySuiteResult r;
+  r.cases = r.single_cases = 14;
+  r.single_by_form = {{"hysteresis/bouc_wen", {1, 6}}, {"hysteresis/duhem", {1, 4}}, {"delay/transport", {3, 3}},
+                      {"creep/add_log", {1, 1}}};
+  const auto text = format_directory_suite(r);
+  EXPECT_NE(text.find("single effects by the labels' form, those with a miss, the weakest first (right/cases): "
+                      "hysteresis/bouc_wen 1/6, hysteresis/duhem 1/4; 2 other forms all right (4 cases)"),
+            std::string::npos)
+      << text;
+  r.single_by_form.clear();  // labels without a form column: no line
+  EXPECT_EQ(format_directory_suite(r).find("labels' form"), std::string::npos);
+}
+
 TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) {
   // The closed-loop Preisach case (tests/data/ambiguous_creep_loop) as a one-case suite labelled creep (the
   // generator labelled it hysteresis): the verdict (the loop) is then wrong, the creep among the ambiguous names.
@@ -575,6 +589,11 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   EXPECT_GE(r.single_correct, 5);
   for (double ratio : r.ratios) EXPECT_LE(ratio, 0.5);
   EXPECT_LE(r.ratios_held_out_shows_effect.size(), r.ratios.size());
+  // The labels have a form column: every single effect is counted under its form, once.
+  int by_form = 0, by_form_right = 0;
+  for (const auto& [form, n] : r.single_by_form) by_form_right += n[0], by_form += n[1];
+  EXPECT_EQ(by_form, r.single_cases);
+  EXPECT_EQ(by_form_right, r.single_correct);
   // The split by the nuisance refit's bounds counts every right case once, on one side.
   EXPECT_LE(r.refit_at_bound_right, r.refit_at_bound);
   EXPECT_EQ(r.refit_at_bound_right + r.refit_inside_right,
