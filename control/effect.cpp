@@ -6,6 +6,7 @@
 #include <bit>
 #include <cmath>
 #include <numbers>
+#include <utility>
 
 #include "control/config_error.hpp"
 #include "control/text_format.hpp"
@@ -346,7 +347,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     }
     D_ = d.D;
   }
-  linear_step_ = kLinearSteps[static_cast<size_t>(ss.order())];
+  linear_step_ = kLinearSteps[delay_fraction_ > 0.0 ? 1 : 0][static_cast<size_t>(ss.order())];
   dc_gain_ = model.G.dc_gain();
   saturate_drive_ = has(EffectKind::saturation) && p(EffectKind::saturation)[2] != 0.0 && dc_gain_ != 0.0;
   const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
@@ -441,14 +442,14 @@ void AugmentedPlant::apply(double u) noexcept {
   y_ = output_stage(y_lin_, sample_);
 }
 
-template <int N>
+template <int N, bool Fractional>
 double AugmentedPlant::linear_step(size_t i, double weight, double w, double dw) noexcept {
   std::array<double, N> next{};
   const auto accumulate = [&](size_t g, double share) {
     const auto& ab = AB_grid_[g];
-    const auto& e = E_grid_[g];
     for (int r = 0; r < N; ++r) {
-      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w + e[static_cast<size_t>(r)] * dw;
+      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w;
+      if constexpr (Fractional) v += E_grid_[g][static_cast<size_t>(r)] * dw;
       for (int c = 0; c < N; ++c) v += ab[static_cast<size_t>(r * (N + 1) + c)] * x_[static_cast<size_t>(c)];
       next[static_cast<size_t>(r)] += share * v;
     }
@@ -463,11 +464,14 @@ double AugmentedPlant::linear_step(size_t i, double weight, double w, double dw)
   return y;
 }
 
-const std::array<AugmentedPlant::LinearStep, AugmentedPlant::kMaxOrder + 1> AugmentedPlant::kLinearSteps{
-    &AugmentedPlant::linear_step<0>, &AugmentedPlant::linear_step<1>, &AugmentedPlant::linear_step<2>,
-    &AugmentedPlant::linear_step<3>, &AugmentedPlant::linear_step<4>, &AugmentedPlant::linear_step<5>,
-    &AugmentedPlant::linear_step<6>, &AugmentedPlant::linear_step<7>, &AugmentedPlant::linear_step<8>,
-    &AugmentedPlant::linear_step<9>};
+template <bool Fractional, size_t... N>
+constexpr std::array<AugmentedPlant::LinearStep, sizeof...(N)> AugmentedPlant::linear_steps(std::index_sequence<N...>) {
+  return {&AugmentedPlant::linear_step<static_cast<int>(N), Fractional>...};
+}
+
+const std::array<std::array<AugmentedPlant::LinearStep, AugmentedPlant::kMaxOrder + 1>, 2> AugmentedPlant::kLinearSteps{
+    linear_steps<false>(std::make_index_sequence<kMaxOrder + 1>{}),
+    linear_steps<true>(std::make_index_sequence<kMaxOrder + 1>{})};
 
 double AugmentedPlant::rest_voltage(double y, double lo, double hi) noexcept {
   reset_steady_state(lo);

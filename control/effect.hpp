@@ -307,12 +307,16 @@ class AugmentedPlant final {
   [[nodiscard]] double time_scale(double w) const noexcept;
   /// x <- weight (A_i x + B_i w + E_i dw) + (1 - weight) (A_{i+1} x + B_{i+1} w + E_{i+1} dw): one grid entry,
   /// or two interpolated; returns C x + D w. dw is the previous drive minus w, E its share of the sample (the
-  /// fractional delay's, zero without one). For the linear block's order N, chosen once at construction
-  /// (with N a constant the compiler unrolls the step; a runtime order cost the diagnosis half its simulation time).
-  template <int N>
+  /// fractional delay's; without one, Fractional false leaves the term out of the hot loop). For the linear
+  /// block's order N, chosen once at construction (with N a constant the compiler unrolls the step; a runtime
+  /// order cost the diagnosis half its simulation time).
+  template <int N, bool Fractional>
   double linear_step(size_t i, double weight, double w, double dw) noexcept;
   using LinearStep = double (AugmentedPlant::*)(size_t, double, double, double) noexcept;
-  static const std::array<LinearStep, kMaxOrder + 1> kLinearSteps;
+  /// [fractional delay][order]
+  static const std::array<std::array<LinearStep, kMaxOrder + 1>, 2> kLinearSteps;
+  template <bool Fractional, size_t... N>
+  static constexpr std::array<LinearStep, sizeof...(N)> linear_steps(std::index_sequence<N...>);
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
 
