@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <cstdio>
 #include <filesystem>
@@ -192,8 +193,12 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
     return static_cast<size_t>(it - header.begin());
   };
   const size_t c_case = column("case"), c_effects = column("effects"), c_dominant = column("dominant");
-  const auto params = std::find(header.begin(), header.end(), "params");  // the independent generator's
-  const auto form = std::find(header.begin(), header.end(), "form");      // the same
+  // The independent generator's columns, which other labels may lack.
+  const auto optional_column = [&](const std::string& name) -> std::optional<size_t> {
+    const auto it = std::find(header.begin(), header.end(), name);
+    return it == header.end() ? std::nullopt : std::optional(static_cast<size_t>(it - header.begin()));
+  };
+  const auto params = optional_column("params"), form = optional_column("form");
   std::vector<LabelledCase> cases;
   for (long n = 2; std::getline(f, line); ++n) {
     if (line.empty()) continue;
@@ -201,9 +206,9 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
     if (v.size() < header.size())
       throw std::runtime_error(file.string() + ":" + std::to_string(n) + ": " + std::to_string(v.size()) + " fields, expected " +
                                std::to_string(header.size()));
-    cases.push_back({v[c_case], v[c_effects], v[c_dominant], form != header.end() ? v[static_cast<size_t>(form - header.begin())] : ""});
-    if (params != header.end() && v[c_effects] != "none")
-      cases.back().weakest_after_refit = weakest_after_refit(v[static_cast<size_t>(params - header.begin())], v[c_effects],
+    cases.push_back({v[c_case], v[c_effects], v[c_dominant], form ? v[*form] : ""});
+    if (params && v[c_effects] != "none")
+      cases.back().weakest_after_refit = weakest_after_refit(v[*params], v[c_effects],
                                                              file.string() + ":" + std::to_string(n));
   }
   return cases;
@@ -386,16 +391,18 @@ std::string held_out_ratios(const DirectorySuiteResult& r) {
   std::vector<double> sorted = r.ratios;
   std::sort(sorted.begin(), sorted.end());
   const auto& shown = r.ratios_held_out_shows_effect;
-  const double worst_shown = shown.empty() ? NAN : *std::max_element(shown.begin(), shown.end());
-  const auto above_half = std::count_if(shown.begin(), shown.end(), [](double x) { return x > 0.5; });
+  const std::string shown_worst =
+      shown.empty() ? "no such cases"
+                    : format("worst %.3f, %td above 0.50", *std::max_element(shown.begin(), shown.end()),
+                             std::count_if(shown.begin(), shown.end(), [](double x) { return x > 0.5; }));
   char b[1024];
   std::snprintf(b, sizeof b,
                 "held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
                 "  against the nominal with offset and start state fitted: worst %.3f;\n"
-                "  on the %zu whose held-out data show the effect (nominal held-out RMSE >= %.1fx the noise): worst %.3f, "
-                "%td above 0.50; the other %zu: the held-out blocks fall where the effect does not act\n",
+                "  on the %zu whose held-out data show the effect (nominal held-out RMSE >= %.1fx the noise): %s; "
+                "the other %zu: the held-out blocks fall where the effect does not act\n",
                 mean, sorted[sorted.size() / 2], worst, worst / 0.5, worst_aligned, shown.size(),
-                DirectorySuiteResult::kHeldOutShowsEffect, worst_shown, above_half, r.ratios.size() - shown.size());
+                DirectorySuiteResult::kHeldOutShowsEffect, shown_worst.c_str(), r.ratios.size() - shown.size());
   return b;
 }
 

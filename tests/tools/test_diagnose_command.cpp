@@ -517,6 +517,13 @@ TEST(DiagnoseIndependentSuite, TheHeldOutRatioIsAlsoGivenWhereTheHeldOutDataShow
                       "0.300, 0 above 0.50; the other 1: the held-out blocks fall where the effect does not act"),
             std::string::npos)
       << text;
+  r.ratios_held_out_shows_effect.clear();  // every correct case's held-out data at the noise: no worst to give
+  const auto none_shown = format_directory_suite(r);
+  EXPECT_NE(none_shown.find("on the 0 whose held-out data show the effect (nominal held-out RMSE >= 1.5x the noise): "
+                            "no such cases; the other 3"),
+            std::string::npos)
+      << none_shown;
+  EXPECT_EQ(none_shown.find(" nan"), std::string::npos) << none_shown;
 }
 
 TEST(DiagnoseIndependentSuite, SingleEffectsAreCountedByTheLabelsFormTheWeakestFirst) {
