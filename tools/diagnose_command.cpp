@@ -60,6 +60,15 @@ std::string at_bounds_note(const DiagnosisResult& r) {
          "; re-identify the nominal model (pvcgel ident) on recordings of this rig";
 }
 
+/// Why the widened run is the one reported when f's shape alone stopped at its bound (the gain stopping at
+/// its own is reason enough): the data are `none` there, or its model predicts the held-out data better.
+std::string widened_why(const DiagnosisResult& r) {
+  const auto& from = r.nominal_refit.widened_from;
+  if (std::find(from.begin(), from.end(), "gain") != from.end()) return "";
+  if (r.verdict == "none") return ", where the data are none";
+  return ", a second analysis beside the ordinary one, reported because its model predicts the held-out data better";
+}
+
 /// Why the refit ran with widened tolerances, and with which (DiagnosisOptions::widen_off_nominal).
 std::string widened_note(const DiagnosisResult& r) {
   const DiagnosisOptions ordinary, wide = widened_tolerances(ordinary);
@@ -69,7 +78,8 @@ std::string widened_note(const DiagnosisResult& r) {
          "): the nominal model's static curve is further off, so the analysis ran with the gain within " +
          range(gain_bounds(wide)) + ", f's shape within " + range(poly_shape_bounds(wide)) +
          " and its next term's slope share within +-" + format("%.2g", wide.poly_next_tolerance) + " (f kept increasing to " +
-         format("%.3g", wide.f_increasing_margin) + "x the largest recorded voltage); re-identify the nominal model (pvcgel ident)";
+         format("%.3g", wide.f_increasing_margin) + "x the largest recorded voltage)" + widened_why(r) +
+         "; re-identify the nominal model (pvcgel ident)";
 }
 
 /// Line of a key in the parsed file (0 when unknown).

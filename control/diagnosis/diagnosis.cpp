@@ -363,11 +363,16 @@ void hold_out(DiagnosisResult& res, const std::vector<Series>& data, const Diagn
 }
 
 /// The `none` test once more with f's shape and next term free to `widened_tolerances` (shape_off names
-/// which stopped at their bound): the diagnosis when the data are none there, else nothing. Adds its
-/// simulations to `simulations` either way.
-std::optional<DiagnosisResult> none_with_a_wider_curve(const HammersteinModel& model, const std::vector<Series>& data,
-                                                       const DiagnosisOptions& options, std::vector<std::string> off,
-                                                       int& simulations) {
+/// which stopped at their bound): `none_result` holds the diagnosis when the data are none there;
+/// `held_out_excess` is what the widened nuisance-only refit leaves of the held-out MSE above its noise.
+struct WiderCurve {
+  std::optional<DiagnosisResult> none_result;
+  double held_out_excess_um2 = NAN;
+  int simulations = 0;
+};
+
+WiderCurve refit_with_a_wider_curve(const HammersteinModel& model, const std::vector<Series>& data,
+                                    const DiagnosisOptions& options, std::vector<std::string> off) {
   const DiagnosisOptions o = widened_tolerances(options);
   DiagnosisResult res;
   hold_out(res, data, o);
@@ -376,22 +381,28 @@ std::optional<DiagnosisResult> none_with_a_wider_curve(const HammersteinModel& m
   (void)align_and_baseline(res, problem, data, o, no_second);
   Nominal k;
   auto refit = refit_and_test(res, problem, data, o, k);
+  WiderCurve w;
+  w.held_out_excess_um2 = Excess(res).base;
   const bool none = decide_none(res, refit, o);
-  simulations += problem.simulations();
-  if (!none) return std::nullopt;
-  res.nominal_refit.widened_from = std::move(off);
-  return res;
+  w.simulations = problem.simulations();
+  if (none) {
+    res.nominal_refit.widened_from = std::move(off);
+    w.none_result = std::move(res);
+  }
+  return w;
 }
 
-}  // namespace
-
-DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
-  check_inputs(model, data);
+/// One diagnosis at the tolerances `options` gives, or from the start at widened_tolerances when
+/// `widened_from` names why. `wider_curve` is set when f's shape alone stopped at its bound and the widened
+/// nuisance-only refit, not `none`, leaves at most DiagnosisOptions::wider_curve_excess of the held-out
+/// excess the ordinary one leaves: to whom the caller offers a widened diagnosis.
+DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<Series>& data,
+                               const DiagnosisOptions& options, std::vector<std::string> widened_from,
+                               std::vector<std::string>* wider_curve) {
   std::optional<SecondPass> second;
   int earlier_simulations = 0;  // of the passes before the one that decides
-  DiagnosisOptions o = options;  // the tolerances in force
-  std::vector<std::string> widened_from;
-  bool shape_tried = false;  // the `none` test with a wider curve (none_with_a_wider_curve) ran and failed
+  DiagnosisOptions o = widened_from.empty() ? options : widened_tolerances(options);  // the tolerances in force
+  bool shape_tried = !widened_from.empty();  // the refit with a wider curve ran (or this pass is wide)
   for (;;) {
     DiagnosisResult res;
     hold_out(res, data, o);
@@ -407,17 +418,19 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
         earlier_simulations += problem.simulations();
         continue;
       }
-      // f's shape alone at its bound: a wider f may make the data none, but effects are not fitted wider
-      // (a dead zone or a saturation may be what bends the curve).
-      if (const auto off = shape_off(res.nominal_refit); !off.empty()) {
-        int side_simulations = 0;
-        auto wide = none_with_a_wider_curve(model, data, options, off, side_simulations);
-        if (wide) {
-          wide->simulations = earlier_simulations + problem.simulations() + side_simulations;
-          return *std::move(wide);
+      // f's shape alone at its bound: a wider f may make the data none; effects are fitted wider only in
+      // a second diagnosis that must predict the held-out data better (a dead zone or a saturation may be
+      // what bends the curve).
+      if (auto off = shape_off(res.nominal_refit); !off.empty()) {
+        auto wide = refit_with_a_wider_curve(model, data, options, off);
+        if (wide.none_result) {
+          wide.none_result->simulations = earlier_simulations + problem.simulations() + wide.simulations;
+          return *std::move(wide.none_result);
         }
-        earlier_simulations += side_simulations;
+        earlier_simulations += wide.simulations;
         shape_tried = true;
+        const Excess ordinary(res);
+        if (wider_curve && wide.held_out_excess_um2 <= o.wider_curve_excess * ordinary.base) *wider_curve = std::move(off);
       }
     }
     res.nominal_refit.widened_from = widened_from;
@@ -436,6 +449,30 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     res.simulations = earlier_simulations + problem.simulations();
     return res;
   }
+}
+
+}  // namespace
+
+// The widened nuisance-only refit alone cannot decide it: it also takes in part of a dead zone or a saturation.
+bool widened_predicts_better(const DiagnosisResult& ordinary, const DiagnosisResult& wide, const DiagnosisOptions& o) {
+  const Excess excess(ordinary);
+  // An `unexplained` diagnosis's model is its nuisance-only refit (its `fitted` errors are the nominal's).
+  const auto left = [&](const DiagnosisResult& r) { return excess(r.mixture.empty() ? r.nominal_refit.errors : r.fitted); };
+  return left(wide) < left(ordinary) - o.ambiguity_margin * excess.base;
+}
+
+DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
+  check_inputs(model, data);
+  std::vector<std::string> wider_curve;
+  DiagnosisResult ordinary = diagnosis_pass(model, data, options, {}, &wider_curve);
+  if (wider_curve.empty()) return ordinary;
+  DiagnosisResult wide = diagnosis_pass(model, data, options, wider_curve, nullptr);
+  wide.simulations += ordinary.simulations;
+  if (!widened_predicts_better(ordinary, wide, options)) {
+    ordinary.simulations = wide.simulations;
+    return ordinary;
+  }
+  return wide;
 }
 
 }  // namespace pvcgel::control::diagnosis

@@ -51,9 +51,12 @@ struct DiagnosisOptions {
   /// When the data are not `none` and the nuisance-only refit's gain stops at its tolerance, the nominal
   /// model's static curve is further off than a recalibration (a nominal identified with another polynomial
   /// order): the diagnosis then runs again with widened_tolerances, so that error is not blamed on an effect.
-  /// When only f's shape stops at its tolerance, the widened refit decides `none` alone: the data are `none`
-  /// if they are `none` there, else the diagnosis goes on with the ordinary tolerances.
+  /// When only f's shape stops at its tolerance, the widened nuisance-only refit decides `none`: the data are
+  /// `none` if they are `none` there. Else, when that refit leaves at most wider_curve_excess of the held-out
+  /// excess the ordinary one leaves, the whole diagnosis runs a second time widened, and is kept when its model
+  /// predicts the held-out data better by the ambiguity margin; otherwise the ordinary diagnosis stands.
   bool widen_off_nominal = true;
+  double wider_curve_excess = 0.75;
   double false_alarm_rate = 0.01;     ///< of the `none` test (level per window, Bonferroni, plus whiteness)
   bool forward_pairs = false;         ///< also rank second effects by their coarse grid in the leader's residual
   double mixture_gain = 0.5;          ///< a second effect must remove at least this share of the excess the first leaves
@@ -223,6 +226,12 @@ std::vector<std::string> refit_at_bounds(const NominalRefit& refit, const Diagno
 /// recorded |u| (or the file's controller range): the n = 2 polynomial of one identification refits to the
 /// n = 3 polynomial of another, which turns over just above the recorded voltages.
 DiagnosisOptions widened_tolerances(DiagnosisOptions options);
+
+/// Whether the diagnosis run at widened_tolerances, `wide`, predicts the held-out data clearly better than the
+/// ordinary one, `ordinary`: its model (the named effects, or the nuisance-only refit when none is named) leaves
+/// less of the ordinary nuisance-only refit's excess MSE by DiagnosisOptions::ambiguity_margin of it. Asked
+/// when f's shape alone stopped at its bound (DiagnosisOptions::wider_curve_excess).
+bool widened_predicts_better(const DiagnosisResult& ordinary, const DiagnosisResult& wide, const DiagnosisOptions& options);
 
 /// f's shape bounds of the refit: 1 -+ tol below a tolerance of 1, [1 / (1 + tol), 1 + tol] from 1 on.
 std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& options);
