@@ -466,7 +466,12 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
   std::vector<std::string> wider_curve;
   DiagnosisResult ordinary = diagnosis_pass(model, data, options, {}, &wider_curve);
   if (wider_curve.empty()) return ordinary;
-  DiagnosisResult wide = diagnosis_pass(model, data, options, wider_curve, nullptr);
+  DiagnosisOptions second = options;  // its stages told apart from the first run's
+  if (options.progress)
+    second.progress = [tell = options.progress](std::string_view stage, std::size_t done, std::size_t total) {
+      tell("with a wider curve: " + std::string(stage), done, total);
+    };
+  DiagnosisResult wide = diagnosis_pass(model, data, second, wider_curve, nullptr);
   wide.simulations += ordinary.simulations;
   if (!widened_predicts_better(ordinary, wide, options)) {
     ordinary.simulations = wide.simulations;

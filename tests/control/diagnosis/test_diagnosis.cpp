@@ -126,7 +126,14 @@ TEST(Diagnose, AnEffectBesideANominalFOfTooLowAnOrderIsFittedWiderWhenThatPredic
   // beside the loop in every fit.
   const auto nominal = n2_fit_of_n3();
   const auto data = std::vector<Series>{recording({EffectKind::hysteresis, {0.1, 30.0}}, 0.05, 7)};
-  const auto r = diagnose(nominal, data);
+  DiagnosisOptions told;
+  std::vector<std::string> stages;  // the progress a user sees names the second run's stages apart
+  told.progress = [&](std::string_view stage, std::size_t done, std::size_t total) {
+    if (done == total) stages.emplace_back(stage);
+  };
+  const auto r = diagnose(nominal, data, told);
+  EXPECT_NE(std::find(stages.begin(), stages.end(), "candidate fits"), stages.end());
+  EXPECT_NE(std::find(stages.begin(), stages.end(), "with a wider curve: candidate fits"), stages.end());
   EXPECT_EQ(r.verdict, "hysteresis") << r.explanation;
   const auto& from = r.nominal_refit.widened_from;
   EXPECT_NE(std::find(from.begin(), from.end(), "poly_shape"), from.end());
