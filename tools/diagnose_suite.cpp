@@ -187,17 +187,16 @@ std::vector<LabelledCase> read_labels(const std::filesystem::path& file) {
   std::string line;
   std::getline(f, line);
   const auto header = csv_fields(line);
-  const auto column = [&](const std::string& name) {
-    const auto it = std::find(header.begin(), header.end(), name);
-    if (it == header.end()) throw std::runtime_error(file.string() + ":1: no column '" + name + "'");
-    return static_cast<size_t>(it - header.begin());
-  };
-  const size_t c_case = column("case"), c_effects = column("effects"), c_dominant = column("dominant");
-  // The independent generator's columns, which other labels may lack.
   const auto optional_column = [&](const std::string& name) -> std::optional<size_t> {
     const auto it = std::find(header.begin(), header.end(), name);
     return it == header.end() ? std::nullopt : std::optional(static_cast<size_t>(it - header.begin()));
   };
+  const auto column = [&](const std::string& name) {
+    if (const auto at = optional_column(name)) return *at;
+    throw std::runtime_error(file.string() + ":1: no column '" + name + "'");
+  };
+  const size_t c_case = column("case"), c_effects = column("effects"), c_dominant = column("dominant");
+  // The independent generator's columns, which other labels may lack.
   const auto params = optional_column("params"), form = optional_column("form");
   std::vector<LabelledCase> cases;
   for (long n = 2; std::getline(f, line); ++n) {
