@@ -436,26 +436,28 @@ void AugmentedPlant::apply(double u) noexcept {
     const double pos = std::clamp(20.0 + std::log(time_scale(w)) * kGridStepsPerLog, 0.0, 39.999);
     y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
   }
-  swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
-  y_op_ += op_gain_ * (y_lin_ - y_op_);
+  if (time_scaling_ == EffectKind::bias_dependent_dynamics) {  // only its time scale reads them
+    swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
+    y_op_ += op_gain_ * (y_lin_ - y_op_);
+  }
   ++sample_;
   y_ = output_stage(y_lin_, sample_);
 }
 
 template <int N, bool Fractional>
 double AugmentedPlant::linear_step(size_t i, double weight, double w, double dw) noexcept {
-  std::array<double, N> next{};
-  const auto accumulate = [&](size_t g, double share) {
+  const auto row = [&](size_t g, int r) {
     const auto& ab = AB_grid_[g];
-    for (int r = 0; r < N; ++r) {
-      double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w;
-      if constexpr (Fractional) v += E_grid_[g][static_cast<size_t>(r)] * dw;
-      for (int c = 0; c < N; ++c) v += ab[static_cast<size_t>(r * (N + 1) + c)] * x_[static_cast<size_t>(c)];
-      next[static_cast<size_t>(r)] += share * v;
-    }
+    double v = ab[static_cast<size_t>(r * (N + 1) + N)] * w;
+    if constexpr (Fractional) v += E_grid_[g][static_cast<size_t>(r)] * dw;
+    for (int c = 0; c < N; ++c) v += ab[static_cast<size_t>(r * (N + 1) + c)] * x_[static_cast<size_t>(c)];
+    return v;
   };
-  accumulate(i, weight);
-  if (weight < 1.0) accumulate(i + 1, 1.0 - weight);
+  std::array<double, N> next;
+  // One grid entry (weight 1) takes its row as it is, not 0 + 1 row: two operations less on the state's chain
+  // from sample to sample (the same numbers).
+  for (int r = 0; r < N; ++r)
+    next[static_cast<size_t>(r)] = weight < 1.0 ? weight * row(i, r) + (1.0 - weight) * row(i + 1, r) : row(i, r);
   double y = D_ * w;
   for (int r = 0; r < N; ++r) {
     x_[static_cast<size_t>(r)] = next[static_cast<size_t>(r)];

@@ -35,12 +35,6 @@ void OddPolynomial::evaluate(double x, double& f, double& df) const noexcept {
   df = p + 2.0 * x2 * dp;
 }
 
-double OddPolynomial::operator()(double x) const noexcept {
-  double f, df;
-  evaluate(x, f, df);
-  return f;
-}
-
 double OddPolynomial::derivative(double x) const noexcept {
   double f, df;
   evaluate(x, f, df);

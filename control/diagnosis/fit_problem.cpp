@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <type_traits>
 
 #include "control/state_space.hpp"
 #include "control/text_format.hpp"
@@ -95,21 +96,48 @@ std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_
 
 namespace {
 
-/// The free response of a discrete state-space model from each unit initial state, over N samples:
-/// mode i at sample t is (C A^t)_i. One row vector carried through A, n^2 per sample in plain loops:
-/// carrying the n x n state through Eigen's dynamic-size product cost 15% of a slow case's diagnosis.
-std::vector<Eigen::VectorXd> free_response_modes(const StateSpace& d, Eigen::Index N) {
-  const auto n = d.A.rows();
-  std::vector<Eigen::VectorXd> modes(static_cast<size_t>(n), Eigen::VectorXd(N));
-  std::vector<double> row(d.C.data(), d.C.data() + n), next(static_cast<size_t>(n));
-  for (Eigen::Index t = 0; t < N; ++t) {
+/// Mode i at sample t is (C A^t)_i: one row vector carried through A. N, the order, a constant up to 4 (the
+/// row and A then stay in registers); 0 reads the order from A.
+template <int N>
+void carry_row(const StateSpace& d, std::vector<Eigen::VectorXd>& modes) {
+  const Eigen::Index n = N > 0 ? N : d.A.rows();
+  constexpr size_t kMax = N > 0 ? N : 0;
+  std::conditional_t<(N > 0), std::array<double, kMax * kMax>, std::vector<double>> a{};
+  std::conditional_t<(N > 0), std::array<double, kMax>, std::vector<double>> row{}, next{};
+  if constexpr (N == 0) {
+    a.resize(static_cast<size_t>(n * n));
+    row.resize(static_cast<size_t>(n));
+    next.resize(static_cast<size_t>(n));
+  }
+  for (Eigen::Index i = 0; i < n; ++i) {
+    row[static_cast<size_t>(i)] = d.C(i);
+    for (Eigen::Index j = 0; j < n; ++j) a[static_cast<size_t>(i * n + j)] = d.A(i, j);
+  }
+  const Eigen::Index samples = modes.front().size();
+  for (Eigen::Index t = 0; t < samples; ++t) {
     for (Eigen::Index i = 0; i < n; ++i) modes[static_cast<size_t>(i)](t) = row[static_cast<size_t>(i)];
     for (Eigen::Index j = 0; j < n; ++j) {
       double v = 0.0;
-      for (Eigen::Index i = 0; i < n; ++i) v += row[static_cast<size_t>(i)] * d.A(i, j);
+      for (Eigen::Index i = 0; i < n; ++i) v += row[static_cast<size_t>(i)] * a[static_cast<size_t>(i * n + j)];
       next[static_cast<size_t>(j)] = v;
     }
-    row.swap(next);
+    std::swap(row, next);
+  }
+}
+
+/// The free response of a discrete state-space model from each unit initial state, over N samples, n^2 per
+/// sample in plain loops: carrying the n x n state through Eigen's dynamic-size product cost 15% of a slow
+/// case's diagnosis, and a runtime order still a tenth.
+std::vector<Eigen::VectorXd> free_response_modes(const StateSpace& d, Eigen::Index N) {
+  const auto n = d.A.rows();
+  std::vector<Eigen::VectorXd> modes(static_cast<size_t>(n), Eigen::VectorXd(N));
+  if (n == 0 || N == 0) return modes;
+  switch (n) {
+    case 1: carry_row<1>(d, modes); break;
+    case 2: carry_row<2>(d, modes); break;
+    case 3: carry_row<3>(d, modes); break;
+    case 4: carry_row<4>(d, modes); break;
+    default: carry_row<0>(d, modes);
   }
   return modes;
 }
