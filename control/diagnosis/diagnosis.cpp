@@ -362,55 +362,50 @@ void hold_out(DiagnosisResult& res, const std::vector<Series>& data, const Diagn
   }
 }
 
-/// The `none` test once more with f's shape and next term free to `widened_tolerances` (shape_off names
-/// which stopped at their bound): `none_result` holds the diagnosis when the data are none there;
-/// `held_out_excess` is what the widened nuisance-only refit leaves of the held-out MSE above its noise.
-struct WiderCurve {
-  std::optional<DiagnosisResult> none_result;
-  double held_out_excess_um2 = NAN;
-  int simulations = 0;
+/// A diagnosis's first stages at the tolerances `o`: alignment, the nuisance-only refit, the `none` test.
+struct PassStart {
+  DiagnosisResult res;
+  Problem problem;
+  DataScale scale;
+  Nominal k;
+  Prediction refit;
+  bool none = false;
 };
 
-WiderCurve refit_with_a_wider_curve(const HammersteinModel& model, const std::vector<Series>& data,
-                                    const DiagnosisOptions& options, std::vector<std::string> off) {
-  const DiagnosisOptions o = widened_tolerances(options);
+PassStart start_pass(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o,
+                     const std::optional<SecondPass>& second) {
   DiagnosisResult res;
   hold_out(res, data, o);
   Problem problem(model, data, res.held_out, o);
-  std::optional<SecondPass> no_second;
-  (void)align_and_baseline(res, problem, data, o, no_second);
+  const DataScale scale = align_and_baseline(res, problem, data, o, second);
   Nominal k;
   auto refit = refit_and_test(res, problem, data, o, k);
-  WiderCurve w;
-  w.held_out_excess_um2 = Excess(res).base;
   const bool none = decide_none(res, refit, o);
-  w.simulations = problem.simulations();
-  if (none) {
-    res.nominal_refit.widened_from = std::move(off);
-    w.none_result = std::move(res);
-  }
-  return w;
+  return {std::move(res), std::move(problem), scale, k, std::move(refit), none};
 }
 
+/// The diagnosis at widened_tolerances, begun: its first stages (start_pass), and why it was widened.
+struct WideStart {
+  std::vector<std::string> from;
+  std::optional<PassStart> start;
+};
+
 /// One diagnosis at the tolerances `options` gives, or from the start at widened_tolerances when
-/// `widened_from` names why. `wider_curve` is set when f's shape alone stopped at its bound and the widened
-/// nuisance-only refit, not `none`, leaves at most DiagnosisOptions::wider_curve_excess of the held-out
-/// excess the ordinary one leaves: to whom the caller offers a widened diagnosis.
+/// `widened.from` names why (its first stages already run when `widened.start` holds them). `wider_curve` is
+/// set when f's shape alone stopped at its bound and the widened nuisance-only refit, not `none`, leaves at
+/// most DiagnosisOptions::wider_curve_excess of the held-out excess the ordinary one leaves: to whom the
+/// caller offers a widened diagnosis, begun.
 DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<Series>& data,
-                               const DiagnosisOptions& options, std::vector<std::string> widened_from,
-                               std::vector<std::string>* wider_curve) {
+                               const DiagnosisOptions& options, WideStart widened, WideStart* wider_curve) {
   std::optional<SecondPass> second;
   int earlier_simulations = 0;  // of the passes before the one that decides
+  std::vector<std::string> widened_from = std::move(widened.from);
   DiagnosisOptions o = widened_from.empty() ? options : widened_tolerances(options);  // the tolerances in force
   bool shape_tried = !widened_from.empty();  // the refit with a wider curve ran (or this pass is wide)
+  std::optional<PassStart> begun = std::move(widened.start);
   for (;;) {
-    DiagnosisResult res;
-    hold_out(res, data, o);
-    Problem problem(model, data, res.held_out, o);
-    const DataScale scale = align_and_baseline(res, problem, data, o, second);
-    Nominal k;
-    auto refit = refit_and_test(res, problem, data, o, k);
-    const bool none = decide_none(res, refit, o);
+    auto [res, problem, scale, k, refit, none] = begun ? *std::move(begun) : start_pass(model, data, o, second);
+    begun.reset();
     if (!none && o.widen_off_nominal && widened_from.empty() && !shape_tried) {
       widened_from = static_curve_off(res.nominal_refit);
       if (!widened_from.empty()) {
@@ -418,19 +413,23 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
         earlier_simulations += problem.simulations();
         continue;
       }
-      // f's shape alone at its bound: a wider f may make the data none; effects are fitted wider only in
-      // a second diagnosis that must predict the held-out data better (a dead zone or a saturation may be
-      // what bends the curve).
+      // f's shape alone at its bound: a wider f may make the data none (the `none` test once more, f's shape
+      // and next term free to widened_tolerances); effects are fitted wider only in a second diagnosis that
+      // must predict the held-out data better (a dead zone or a saturation may be what bends the curve).
       if (auto off = shape_off(res.nominal_refit); !off.empty()) {
-        auto wide = refit_with_a_wider_curve(model, data, options, off);
-        if (wide.none_result) {
-          wide.none_result->simulations = earlier_simulations + problem.simulations() + wide.simulations;
-          return *std::move(wide.none_result);
+        auto wide = start_pass(model, data, widened_tolerances(options), std::nullopt);
+        if (wide.none) {
+          wide.res.nominal_refit.widened_from = std::move(off);
+          wide.res.simulations = earlier_simulations + problem.simulations() + wide.problem.simulations();
+          return std::move(wide.res);
         }
-        earlier_simulations += wide.simulations;
         shape_tried = true;
-        const Excess ordinary(res);
-        if (wider_curve && wide.held_out_excess_um2 <= o.wider_curve_excess * ordinary.base) *wider_curve = std::move(off);
+        if (wider_curve && Excess(wide.res).base <= o.wider_curve_excess * Excess(res).base) {
+          wider_curve->from = std::move(off);
+          wider_curve->start.emplace(std::move(wide));  // its simulations are the second run's to count
+        } else {
+          earlier_simulations += wide.problem.simulations();
+        }
       }
     }
     res.nominal_refit.widened_from = widened_from;
@@ -447,7 +446,7 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
       decide(res, problem, data, scale, o);
     }
     res.simulations = earlier_simulations + problem.simulations();
-    return res;
+    return std::move(res);
   }
 }
 
@@ -463,15 +462,15 @@ bool widened_predicts_better(const DiagnosisResult& ordinary, const DiagnosisRes
 
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
   check_inputs(model, data);
-  std::vector<std::string> wider_curve;
+  WideStart wider_curve;
   DiagnosisResult ordinary = diagnosis_pass(model, data, options, {}, &wider_curve);
-  if (wider_curve.empty()) return ordinary;
+  if (wider_curve.from.empty()) return ordinary;
   DiagnosisOptions second = options;  // its stages told apart from the first run's
   if (options.progress)
     second.progress = [tell = options.progress](std::string_view stage, std::size_t done, std::size_t total) {
       tell("with a wider curve: " + std::string(stage), done, total);
     };
-  DiagnosisResult wide = diagnosis_pass(model, data, second, wider_curve, nullptr);
+  DiagnosisResult wide = diagnosis_pass(model, data, second, std::move(wider_curve), nullptr);
   wide.simulations += ordinary.simulations;
   if (!widened_predicts_better(ordinary, wide, options)) {
     ordinary.simulations = wide.simulations;
