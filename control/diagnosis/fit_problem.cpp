@@ -65,7 +65,14 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
   }
 }
 
-double rest_from_output(AugmentedPlant& plant, const Series& s) {
+std::pair<double, double> voltage_range(const Series& s) {
+  const auto [lo, hi] = std::minmax_element(s.u_V.begin(), s.u_V.end());
+  return {*lo, *hi};
+}
+
+double rest_from_output(AugmentedPlant& plant, const Series& s) { return rest_from_output(plant, s, voltage_range(s)); }
+
+double rest_from_output(AugmentedPlant& plant, const Series& s, std::pair<double, double> u_range_V) {
   // Intercept of a line through the first 10 samples: the recording may start moving at once.
   const size_t n = std::min<size_t>(10, s.y_um.size());
   double sk = 0, sy = 0, skk = 0, sky = 0;
@@ -79,9 +86,9 @@ double rest_from_output(AugmentedPlant& plant, const Series& s) {
   const double N = static_cast<double>(n);
   const double slope = n > 1 ? (N * sky - sk * sy) / (N * skk - sk * sk) : 0.0;
   const double y0 = (sy - slope * sk) / N;
-  const auto [lo, hi] = std::minmax_element(s.u_V.begin(), s.u_V.end());
-  const double margin = 0.2 * std::max(*hi - *lo, 1e-6);
-  return plant.rest_voltage(y0, *lo - margin, *hi + margin);
+  const auto [lo, hi] = u_range_V;
+  const double margin = 0.2 * std::max(hi - lo, 1e-6);
+  return plant.rest_voltage(y0, lo - margin, hi + margin);
 }
 
 std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_out) {

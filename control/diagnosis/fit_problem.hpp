@@ -105,8 +105,12 @@ struct FitSpace {
   }
 };
 
-/// The rest voltage (steady state) whose output matches the first measured samples.
+/// The smallest and largest recorded voltage.
+std::pair<double, double> voltage_range(const Series& s);
+/// The rest voltage (steady state) whose output matches the first measured samples, searched over the
+/// recorded voltages (`u_range_V`: voltage_range(s), given when known) and a fifth of their span beyond.
 double rest_from_output(AugmentedPlant& plant, const Series& s);
+double rest_from_output(AugmentedPlant& plant, const Series& s, std::pair<double, double> u_range_V);
 
 /// The fit samples of a held-out mask as [begin, end) ranges, so sums over them run on contiguous memory.
 std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_out);
@@ -149,8 +153,10 @@ class Problem {
       block_.push_back(block_length(mask));
     }
     initial_V_.assign(d.size(), NAN);
-    for (const auto& s : d)
-      for (double u : s.u_V) u_ref_ = std::max(u_ref_, std::abs(u));
+    for (const auto& s : d) {
+      u_range_.push_back(voltage_range(s));
+      u_ref_ = std::max({u_ref_, std::abs(u_range_.back().first), std::abs(u_range_.back().second)});
+    }
     u_keep_ = std::max(o.f_increasing_margin * u_ref_, o.f_increasing_up_to_V);
   }
   /// The nominal model, as given (before any refit).
@@ -173,7 +179,7 @@ class Problem {
       const auto& s = data_[r];
       AugmentedPlant plant(mk, io_, s.sample_time_s, e);
       if (r < loop_memory_.size()) plant.set_loop_memory(loop_memory_[r]);
-      const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s) : initial_V_[r];
+      const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s, u_range_[r]) : initial_V_[r];
       const size_t n = all ? s.u_V.size() : end_[r];
       out.push_back(plant.simulate(std::span<const double>(s.u_V).first(n), v0));
     }
@@ -254,6 +260,7 @@ class Problem {
   std::vector<double> initial_V_;
   std::vector<double> loop_memory_;
   double io_ = 1.0;
+  std::vector<std::pair<double, double>> u_range_;  ///< per recording, voltage_range
   double u_ref_ = 1e-9;  ///< largest recorded |u| (V)
   double u_keep_ = 0.0;  ///< f stays increasing up to here (V)
   std::pair<double, double> gain_;  ///< the refit's gain bounds
