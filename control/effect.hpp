@@ -317,6 +317,8 @@ class AugmentedPlant final {
   static const std::array<std::array<LinearStep, kMaxOrder + 1>, 2> kLinearSteps;
   template <bool Fractional, size_t... N>
   static constexpr std::array<LinearStep, sizeof...(N)> linear_steps(std::index_sequence<N...>);
+  /// apply's body.
+  void advance(double u_V) noexcept;
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
 
