@@ -136,14 +136,15 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
   constexpr int kBits = 24, kMaxIterations = 40;
   const auto level = window_level(data, o);
   for (size_t r = 0; r < data.size(); ++r) {
-    const auto [lo, hi] = std::minmax_element(data[r].u_V.begin(), data[r].u_V.end());
-    const double reach = 0.25 * std::max(*hi - *lo, 1e-6 * std::max(std::abs(*hi), 1.0));
+    const auto range = voltage_range(data[r]);
+    const auto [lo, hi] = range;
+    const double reach = 0.25 * std::max(hi - lo, 1e-6 * std::max(std::abs(hi), 1.0));
     // The voltage the first samples imply (NaN) follows the model each simulation runs; a refined start is
     // held fixed, so it replaces that only when it fits clearly better.
     double from = starts[r];
     if (std::isnan(from)) {
       AugmentedPlant plant(p.model(), p.delay(), data[r].sample_time_s, std::span<const Effect>{});
-      from = rest_from_output(plant, data[r]);
+      from = rest_from_output(plant, data[r], range);
     }
     std::uintmax_t iterations = kMaxIterations;
     const auto [best_V, best_error] = boost::math::tools::brent_find_minima(

@@ -103,15 +103,15 @@ std::vector<std::pair<size_t, size_t>> fit_ranges(const std::vector<char>& held_
 
 namespace {
 
-/// Mode i at sample t is (C A^t)_i: one row vector carried through A. N, the order, a constant up to 4 (the
+/// Mode i at sample t is (C A^t)_i: one row vector carried through A. Order, a constant up to 4 (the
 /// row and A then stay in registers); 0 reads the order from A.
-template <int N>
+template <int Order>
 void carry_row(const StateSpace& d, std::vector<Eigen::VectorXd>& modes) {
-  const Eigen::Index n = N > 0 ? N : d.A.rows();
-  constexpr size_t kMax = N > 0 ? N : 0;
-  std::conditional_t<(N > 0), std::array<double, kMax * kMax>, std::vector<double>> a{};
-  std::conditional_t<(N > 0), std::array<double, kMax>, std::vector<double>> row{}, next{};
-  if constexpr (N == 0) {
+  const Eigen::Index n = Order > 0 ? Order : d.A.rows();
+  constexpr size_t kMax = Order > 0 ? Order : 0;
+  std::conditional_t<(Order > 0), std::array<double, kMax * kMax>, std::vector<double>> a{};
+  std::conditional_t<(Order > 0), std::array<double, kMax>, std::vector<double>> row{}, next{};
+  if constexpr (Order == 0) {
     a.resize(static_cast<size_t>(n * n));
     row.resize(static_cast<size_t>(n));
     next.resize(static_cast<size_t>(n));
