@@ -378,6 +378,24 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   return s.str();
 }
 
+/// The best pair's test (SecondEffectTest), null when no pair was fitted.
+std::string second_effect_test_json(const SecondEffectTest& t) {
+  if (t.effects.size() != 2) return "null";
+  std::ostringstream j;
+  j << "{\"effects\": " << quoted_array(t.effects) << ", \"rmse_validation_um\": " << number_or_null(t.rmse_validation_um)
+    << ", \"members\": [";
+  for (size_t i = 0; i < 2; ++i) {
+    const HeldOutTest& m = t.member[i];
+    j << (i ? ", " : "") << "{\"name\": " << quoted(t.effects[i]) << ", \"heldout_mse_removed_um2\": " << number_or_null(m.mean_um2)
+      << ", \"t\": " << number_or_null(m.t) << ", \"t_threshold\": " << number_or_null(m.threshold)
+      << ", \"signed_rank_p\": " << number_or_null(m.signed_rank_p) << ", \"blocks\": " << m.blocks
+      << ", \"significant\": " << (m.significant ? "true" : "false") << "}";
+  }
+  j << "], \"explains_excess\": " << (t.explained ? "true" : "false") << ", \"material\": " << (t.material ? "true" : "false")
+    << ", \"named\": " << (t.named ? "true" : "false") << "}";
+  return j.str();
+}
+
 /// The keys of issue 11: mixture, ambiguity, alignment, the nuisance refit and the none test.
 std::string extension_json(const DiagnosisResult& r) {
   std::ostringstream j;
@@ -398,6 +416,7 @@ std::string extension_json(const DiagnosisResult& r) {
                                   : "{\"name\": " + quoted(r.withheld_second) +
                                         ", \"refit_at_bounds\": " + quoted_array(r.withheld_at_bounds) + "}")
     << ",\n";
+  j << "  \"second_effect_test\": " << second_effect_test_json(r.second_effect_test) << ",\n";
   const auto& a = r.alignment;
   j << "  \"alignment\": {\"io_delay_samples\": " << number_or_null(a.io_delay_samples, "%.3g") << ", \"declared\": "
     << (a.declared ? std::to_string(*a.declared) : "null") << ", \"used_samples\": " << number_or_null(a.used_samples, "%.3g")
@@ -534,6 +553,19 @@ DiagnosisOptions diagnosis_options(const DiagnoseArgs& a, const LoadedModel& lm)
 
 namespace {
 
+/// The best pair's test in one line: each member's held-out contribution and test, and what it lacked.
+std::string second_effect_test_line(const SecondEffectTest& t) {
+  std::ostringstream s;
+  s << "best pair: " << t.effects[0] << " + " << t.effects[1] << ", held-out " << number_or_null(t.rmse_validation_um, "%.4f") << " um;";
+  for (size_t i = 0; i < 2; ++i) {
+    const HeldOutTest& m = t.member[i];
+    s << " " << t.effects[i] << " removes " << number_or_null(m.mean_um2, "%.3g") << " um^2 (t " << number_or_null(m.t, "%.2f")
+      << " against " << number_or_null(m.threshold, "%.2f") << ", signed-rank p " << number_or_null(m.signed_rank_p, "%.2g") << ", "
+      << m.blocks << " blocks: " << (m.significant ? "significant" : "not significant") << ");";
+  }
+  return s.str() + (t.named ? " both named" : " not named (" + join(second_effect_shortfalls(t), ", ") + ")");
+}
+
 /// What the command prints: the verdict, alignment, nominal refit, errors, mismatch windows, candidates.
 std::string summary_text(const DiagnosisResult& r, const DiagnoseArgs& a, const std::vector<long>& skipped, double cpu) {
   std::ostringstream s;
@@ -552,6 +584,7 @@ std::string summary_text(const DiagnosisResult& r, const DiagnoseArgs& a, const 
   if (!r.withheld_second.empty())
     s << "withheld second effect: " << r.withheld_second << " (significant, but the pair's nominal refit stops at its tolerance on "
       << join(r.withheld_at_bounds, ", ") << ")\n";
+  if (const auto& t = r.second_effect_test; t.effects.size() == 2) s << second_effect_test_line(t) << "\n";
   if (!r.ambiguous_with.empty()) {
     s << "ambiguous with:";
     for (const auto& n : r.ambiguous_with) s << " " << n;

@@ -219,6 +219,8 @@ struct CaseOutcome {
   std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
   std::string withheld;   ///< DiagnosisResult::withheld_second
   std::string ambiguous;  ///< DiagnosisResult::ambiguous_with, '+'-separated
+  std::string best_pair;  ///< the best pair fitted (SecondEffectTest::effects), '+'-separated; empty: none fitted
+  std::vector<std::string> pair_shortfalls;  ///< second_effect_shortfalls of that pair
   bool widened = false;   ///< NominalRefit::widened
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
   double nominal_held_out_over_noise = NAN;  ///< the nominal's held-out RMSE over the estimated noise
@@ -259,6 +261,8 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.at_bounds = join(d.nominal_refit.at_bounds, ",");
     o.withheld = d.withheld_second;
     o.ambiguous = join(d.ambiguous_with, "+");
+    o.best_pair = join(d.second_effect_test.effects, "+");
+    o.pair_shortfalls = second_effect_shortfalls(d.second_effect_test);
     o.widened = d.nominal_refit.widened();
   } catch (const std::exception& e) {
     o.verdict = "error";
@@ -286,14 +290,18 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
 /// One case's line: the truth, the verdict and mixture, the score, the held-out ratio, the time, the
 /// leading candidates and the marks (widened, refit at bound, withheld second, ambiguous, error).
 std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
+  const bool missed_mixture = c.effects.find('+') != std::string::npos && !scored_right(c, o);
+  const std::string pair = !missed_mixture        ? ""
+                           : o.best_pair.empty() ? "  no pair fitted"
+                                                 : "  best pair: " + o.best_pair + " (" + join(o.pair_shortfalls, ", ") + ")";
   char line[1024];
-  std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s\n",
+  std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s%s\n",
                 c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
                 scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.widened ? "  widened" : "",
                 o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
                 o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(),
-                o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), o.error.empty() ? "" : "  error: ",
-                o.error.c_str());
+                o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), pair.c_str(),
+                o.error.empty() ? "" : "  error: ", o.error.c_str());
   return line;
 }
 
@@ -330,6 +338,25 @@ void tally_single(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutc
   }
 }
 
+/// Adds a mixture without both effects named to the breakdown by its best pair.
+void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
+  if (o.best_pair.empty() || o.verdict == "error") {
+    ++r.mixture_missed_no_pair;
+  } else if (!names_both(o.best_pair, c.effects)) {
+    ++r.mixture_missed_other_pair;
+  } else {
+    ++r.mixture_missed_labels_pair;
+    for (const auto& why : o.pair_shortfalls) {
+      // "X not significant" counts by which member: the labels' dominant or the other.
+      const auto cut = why.find(" not significant");
+      const std::string key = cut == std::string::npos ? why
+                              : why.substr(0, cut) == c.dominant ? "the dominant not significant"
+                                                                 : "the other not significant";
+      ++r.mixture_labels_pair_shortfalls[key];
+    }
+  }
+}
+
 /// Adds one case to the scores.
 void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
   ++r.cases;
@@ -350,6 +377,7 @@ void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o)
   if (single_label) return tally_single(r, c, o);
   ++r.mixture_cases;
   r.mixture_both_named += names_both(o.mixture, c.effects);
+  if (!names_both(o.mixture, c.effects)) tally_missed_mixture(r, c, o);
   r.mixture_dominant_correct += o.verdict == c.dominant;
   if (o.verdict == c.dominant) add_ratios(r, o);
 }
@@ -425,6 +453,17 @@ std::string forms_missed(const DirectorySuiteResult& r) {
   return s + format("; %d other forms all right (%d cases)\n", all_right, all_right_cases);
 }
 
+/// "mixtures without both named, by the best pair fitted: ..." (nothing when every mixture was named).
+std::string mixtures_missed(const DirectorySuiteResult& r) {
+  const int missed = r.mixture_missed_no_pair + r.mixture_missed_other_pair + r.mixture_missed_labels_pair;
+  if (missed == 0) return "";
+  std::string why;
+  for (const auto& [reason, n] : r.mixture_labels_pair_shortfalls) why += format("%s%s %d", why.empty() ? "" : ", ", reason.c_str(), n);
+  return format("mixtures without both named (%d), by the best pair fitted: another pair %d, none fitted %d, the labels' pair %d%s%s%s\n",
+                missed, r.mixture_missed_other_pair, r.mixture_missed_no_pair, r.mixture_missed_labels_pair,
+                why.empty() ? "" : " (", why.c_str(), why.empty() ? "" : ")");
+}
+
 }  // namespace
 
 std::string format_directory_suite(const DirectorySuiteResult& r) {
@@ -463,7 +502,7 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                 "ratio_after_gain_offset_refit): single effects %d/%d, mixtures with both named %d/%d\n",
                 DirectorySuiteResult::kVisibleAfterRefit, r.visible_single_correct, r.visible_single_cases,
                 r.visible_mixture_both_named, r.visible_mixture_cases);
-  return s + forms_missed(r);
+  return s + mixtures_missed(r) + forms_missed(r);
 }
 
 }  // namespace pvcgel::tools

@@ -77,6 +77,11 @@ struct DirectorySuiteResult {
   /// cases the nuisance-only refit cannot simply absorb.
   static constexpr double kVisibleAfterRefit = 1.5;
   int visible_single_cases = 0, visible_single_correct = 0, visible_mixture_cases = 0, visible_mixture_both_named = 0;
+  /// Mixtures without both effects named, by the best pair the diagnosis fitted (DiagnosisResult::second_effect_test):
+  /// no pair fitted, another pair than the labels', or the labels' pair with what kept its second effect out
+  /// (second_effect_shortfalls; a case with several counts under each).
+  int mixture_missed_no_pair = 0, mixture_missed_other_pair = 0, mixture_missed_labels_pair = 0;
+  std::map<std::string, int> mixture_labels_pair_shortfalls;
   /// Single effects by the labels' `form` column (the generator's own form of the effect, when the labels
   /// have one), as "effect/form": {right, cases}. Which forms the candidates miss, without reading the labels.
   std::map<std::string, std::array<int, 2>> single_by_form;

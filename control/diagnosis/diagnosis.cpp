@@ -346,6 +346,17 @@ std::vector<std::string> static_curve_off(const NominalRefit& r) {
 
 }  // namespace
 
+std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test) {
+  std::vector<std::string> out;
+  if (test.named || test.effects.size() != 2) return out;
+  for (size_t i = 0; i < 2; ++i)
+    if (!test.member[i].significant) out.push_back(test.effects[i] + " not significant");
+  if (!test.explained) out.emplace_back("the pair leaves over half the excess");
+  if (!test.material) out.emplace_back("not material");
+  if (out.empty()) out.emplace_back("withheld");
+  return out;
+}
+
 std::string_view loop_start_name(double branch) noexcept {
   if (branch == 0.0) return "virgin";
   if (std::abs(branch) < 1.0) return branch > 0.0 ? "partway rising" : "partway falling";

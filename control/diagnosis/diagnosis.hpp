@@ -4,6 +4,7 @@
 /// voltage (output error), locate where and in which regime the residual
 /// exceeds the noise, fit candidate effects and choose by held-out error.
 
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <map>
@@ -162,6 +163,27 @@ struct NoneTest {
   bool level_ok = true, white = true;
 };
 
+/// A one-sided test that model b predicts the held-out data better than model a.
+struct HeldOutTest {
+  double mean_um2 = 0.0;   ///< mean held-out squared-error reduction (a's MSE minus b's)
+  double t = 0.0, threshold = 0.0;  ///< the t statistic and its threshold at half the level
+  double signed_rank_p = 1.0;       ///< one-sided p-value of the Wilcoxon signed-rank test on the blocks
+  int blocks = 0;           ///< blocks tested
+  bool significant = false;
+};
+
+/// The test of the best pair of effects fitted (DiagnosisResult::second_effect_test): why a second effect was
+/// named or not, so that a mixture left unnamed can be followed up.
+struct SecondEffectTest {
+  std::vector<std::string> effects;  ///< the pair fitted, the larger contribution first (empty: no pair fitted)
+  double rmse_validation_um = 0.0;   ///< the pair's held-out RMSE
+  /// Per member: the pair against the other member alone on held-out blocks (its contribution, mean_um2).
+  std::array<HeldOutTest, 2> member{};
+  bool explained = false;  ///< the pair leaves at most DiagnosisOptions::explained_excess of the excess
+  bool material = false;   ///< each member removes enough of what the other leaves (DiagnosisOptions::mixture_gain)
+  bool named = false;      ///< both named (false also when the second was withheld: DiagnosisResult::withheld_second)
+};
+
 /// The outcome.
 struct DiagnosisResult {
   std::string verdict;  ///< an effect name, "none" or "unexplained"
@@ -178,6 +200,7 @@ struct DiagnosisResult {
   /// nominal refit stops at its tolerance on `withheld_at_bounds` (it may stand in for the nominal's error).
   std::string withheld_second;
   std::vector<std::string> withheld_at_bounds;
+  SecondEffectTest second_effect_test;
   Alignment alignment;
   NominalRefit nominal_refit;
   NoneTest none_test;
@@ -254,14 +277,6 @@ HammersteinModel refit_model(const HammersteinModel& model, double time_scale, d
 /// G with every time constant multiplied by `factor` (G(factor s)): same DC gain.
 TransferFunction time_scaled(const TransferFunction& G, double factor);
 
-/// A one-sided test that model b predicts the held-out data better than model a.
-struct HeldOutTest {
-  double mean_um2 = 0.0;   ///< mean held-out squared-error reduction (a's MSE minus b's)
-  double t = 0.0, threshold = 0.0;  ///< the t statistic and its threshold at half the level
-  double signed_rank_p = 1.0;       ///< one-sided p-value of the Wilcoxon signed-rank test on the blocks
-  int blocks = 0;           ///< blocks tested
-  bool significant = false;
-};
 
 /// One-sided p-value P(W+ >= observed) of the Wilcoxon signed-rank statistic of `x` (zeros dropped,
 /// average ranks on ties) under symmetry about 0: exact up to 300 values, the normal approximation above.
@@ -281,6 +296,11 @@ HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vec
 /// on the verdict's yardstick: the held-out data when the mismatch reaches them, else the fit segment (a
 /// verdict needs at most DiagnosisOptions::explained_excess). NaN when the refit leaves no excess.
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
+
+/// What kept the best pair's second effect out of the mixture, one phrase each ("saturation not significant",
+/// "the pair leaves over half the excess", "not material", or "withheld" when every test passed): empty when
+/// both were named or no pair was fitted.
+std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test);
 
 /// The name of a loop's start (CandidateResult::loop_memory): "rising", "falling", "virgin", or "partway
 /// rising" / "partway falling" (a share of the widest play's width, AugmentedPlant::set_loop_memory).

@@ -309,8 +309,18 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
   const auto excess_alone = [&](const CandidateResult* c) { return c ? excess(c->errors) : excess.base; };
   const bool material = with_both <= o.mixture_gain * std::min(excess_alone(a0), excess_alone(a1)) &&
                         std::min(c0, c1) > 0.05 * excess.s2;
-  const bool ok = excess.explained_by(pair.errors, o) && t0.significant && t1.significant && material;
-  if (c1 > c0) std::swap(pair.effects[0], pair.effects[1]);
+  auto& test = res.second_effect_test;
+  test.explained = excess.explained_by(pair.errors, o);
+  test.material = material;
+  test.member = {t0, t1};
+  const bool ok = test.explained && t0.significant && t1.significant && material;
+  if (c1 > c0) {
+    std::swap(pair.effects[0], pair.effects[1]);
+    std::swap(test.member[0], test.member[1]);
+  }
+  test.effects = {std::string(to_string(pair.effects[0].kind)), std::string(to_string(pair.effects[1].kind))};
+  test.rmse_validation_um = pair.errors.rmse_validation_um;
+  test.named = ok;
   if (ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   return ok;
 }

@@ -153,6 +153,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   const bool single_ok = best.fitted && excess.explained_by(best.errors, o);
   bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, problem, data, scale, o);
+  res.second_effect_test.named = pair_ok;
   if (pair_ok) {
     res.fitted = pair.errors;
     set_verdict(res, problem, pair.effects, pair.nominal, o);

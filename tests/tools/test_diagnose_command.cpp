@@ -234,7 +234,8 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   const auto json = read(a.json);
   for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
                           "\"declared\": null", "\"offset_um\": ", "\"at_bounds\": [", "\"widened\": false",
-                          "\"widened_from\": []", "\"withheld_second_effect\": ", "\"candidates_judged_on\": \"held_out\""})
+                          "\"widened_from\": []", "\"withheld_second_effect\": ", "\"candidates_judged_on\": \"held_out\"",
+                          "\"second_effect_test\": "})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
   // The augmented model keeps the user's [controller] table and the sim backend accepts it.
   const auto text = read(o.augmented_model_path);
@@ -413,6 +414,17 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
   EXPECT_NE(o.summary.find("withheld second effect: dead_zone"), std::string::npos) << o.summary;
   EXPECT_NE(read(a.json).find("\"withheld_second_effect\": {\"name\": \"dead_zone\", \"refit_at_bounds\": [\"poly_shape\"]}"),
             std::string::npos);
+  // The pair test passed (both members significant, material, the excess explained) and says so.
+  const auto& t = r.second_effect_test;
+  ASSERT_EQ(t.effects.size(), 2u) << o.summary;
+  EXPECT_EQ(t.effects[0], "hysteresis") << o.summary;
+  EXPECT_EQ(t.effects[1], "dead_zone") << o.summary;
+  EXPECT_TRUE(t.member[0].significant && t.member[1].significant && t.explained && t.material) << o.summary;
+  EXPECT_GT(t.member[0].mean_um2, t.member[1].mean_um2) << o.summary;
+  EXPECT_FALSE(t.named) << o.summary;
+  EXPECT_NE(o.summary.find("best pair: hysteresis + dead_zone"), std::string::npos) << o.summary;
+  EXPECT_NE(o.summary.find("not named (withheld)"), std::string::npos) << o.summary;
+  EXPECT_NE(read(a.json).find("\"second_effect_test\": {\"effects\": [\"hysteresis\", \"dead_zone\"]"), std::string::npos);
 }
 
 /// Both effects of a pair named, dominant first, with its nominal refit stopped at f's shape and nothing withheld.
@@ -423,6 +435,12 @@ void expect_both_named_beside_fs_shape_bound(const DiagnoseOutcome& o, EffectKin
   EXPECT_EQ(r.mixture[1].kind, second) << o.summary;
   EXPECT_EQ(r.nominal_refit.at_bounds, std::vector<std::string>{"poly_shape"}) << o.summary;
   EXPECT_TRUE(r.withheld_second.empty()) << o.summary;
+  const auto& t = r.second_effect_test;
+  EXPECT_TRUE(t.named) << o.summary;
+  EXPECT_EQ(t.effects, (std::vector<std::string>{std::string(to_string(dominant)), std::string(to_string(second))})) << o.summary;
+  EXPECT_NEAR(t.member[0].mean_um2, r.contribution.at(0), 1e-12) << o.summary;
+  EXPECT_NEAR(t.member[1].mean_um2, r.contribution.at(1), 1e-12) << o.summary;
+  EXPECT_NE(o.summary.find("both named"), std::string::npos) << o.summary;
 }
 
 TEST(DiagnoseWithheldSecond, ADriftBesideFsShapeAtItsBoundIsStillNamed) {
@@ -526,6 +544,23 @@ TEST(DiagnoseIndependentSuite, TheHeldOutRatioIsAlsoGivenWhereTheHeldOutDataShow
   EXPECT_EQ(none_shown.find(" nan"), std::string::npos) << none_shown;
 }
 
+TEST(DiagnoseIndependentSuite, MixturesLeftUnnamedAreCountedByTheBestPairAndWhatKeptItsSecondOut) {
+  DirectorySuiteResult r;
+  r.cases = r.mixture_cases = 10;
+  r.mixture_both_named = 4;
+  r.mixture_missed_other_pair = 3;
+  r.mixture_missed_no_pair = 1;
+  r.mixture_missed_labels_pair = 2;
+  r.mixture_labels_pair_shortfalls = {{"the other not significant", 2}, {"not material", 1}};
+  const auto text = format_directory_suite(r);
+  EXPECT_NE(text.find("mixtures without both named (6), by the best pair fitted: another pair 3, none fitted 1, the labels' "
+                      "pair 2 (not material 1, the other not significant 2)"),
+            std::string::npos)
+      << text;
+  r.mixture_missed_other_pair = r.mixture_missed_no_pair = r.mixture_missed_labels_pair = 0;  // all named: no line
+  EXPECT_EQ(format_directory_suite(r).find("mixtures without both named"), std::string::npos);
+}
+
 TEST(DiagnoseIndependentSuite, SingleEffectsAreCountedByTheLabelsFormTheWeakestFirst) {
   DirectorySuiteResult r;
   r.cases = r.single_cases = 14;
@@ -613,6 +648,9 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   EXPECT_LE(r.visible_single_cases, r.single_cases);
   EXPECT_LE(r.visible_single_correct, std::min(r.visible_single_cases, r.single_correct));
   EXPECT_LE(r.visible_mixture_both_named, std::min(r.visible_mixture_cases, r.mixture_both_named));
+  // Every mixture left unnamed is counted once under its best pair.
+  EXPECT_EQ(r.mixture_missed_no_pair + r.mixture_missed_other_pair + r.mixture_missed_labels_pair,
+            r.mixture_cases - r.mixture_both_named);
 }
 
 }  // namespace
