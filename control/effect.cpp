@@ -53,7 +53,7 @@ namespace {
 /// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40.
 constexpr double kGridStepsPerLog = 20.0 / (2.0 * std::numbers::ln2);  // 20 / ln 4
 
-/// G's slowest mode within the realised linear block (which may hold creep and a mode besides G):
+/// G's slowest mode within a realisation of G (or of the linear block, without creep and a mode):
 /// its projector's parts lambda v w^T and v w^T B, w^T v = 1, so that A + (k - 1) dA, B + (k - 1) dB
 /// runs that mode alone k times faster and keeps its DC gain.
 struct SlowMode {
@@ -67,7 +67,7 @@ SlowMode slow_mode(const StateSpace& ss, const TransferFunction& G, const std::s
   const auto poles = G.poles();
   double slowest = -INFINITY;
   for (const auto& p : poles) slowest = std::max(slowest, p.real());
-  // Right and left eigenvectors of that pole (validate_mixture keeps creep and a mode out of the block).
+  // Right and left eigenvectors of that pole (beside creep or a mode, `ss` is G's own realisation: slow_mode_in_parts).
   const auto eigenvector = [&](const Eigen::MatrixXd& M, double& lambda) {
     const Eigen::EigenSolver<Eigen::MatrixXd> es(M);
     Eigen::Index j = 0;
@@ -82,6 +82,16 @@ SlowMode slow_mode(const StateSpace& ss, const TransferFunction& G, const std::s
   const Eigen::VectorXd v = eigenvector(ss.A, lambda), w = eigenvector(ss.A.transpose(), lambda);
   const Eigen::MatrixXd P = v * w.transpose() / w.dot(v);
   return {lambda * P, P * ss.B};
+}
+
+/// slow_mode of G's own realisation `g` within a block realised in parts (realize_in_parts) of `order` states,
+/// G's first: the other states' rows and columns stay as they are.
+SlowMode slow_mode_in_parts(const StateSpace& g, const TransferFunction& G, int order, const std::string& key) {
+  const SlowMode own = slow_mode(g, G, key);
+  SlowMode out{Eigen::MatrixXd::Zero(order, order), Eigen::VectorXd::Zero(order)};
+  out.dA.topLeftCorner(g.order(), g.order()) = own.dA;
+  out.dB.head(g.order()) = own.dB;
+  return out;
 }
 
 /// The linear block with the effects' LTI parts folded in (creep branches in
@@ -108,6 +118,48 @@ TransferFunction linear_block(const TransferFunction& G, bool creep, const std::
     den = polynomial_multiply(den, mode_den);
   }
   return TransferFunction(num, den);
+}
+
+/// The same linear block as linear_block's, realised in parts so that G's states stay G's own: G's realisation
+/// first, then each creep branch's state (fraction G(0) / (tau s + 1), in parallel), then the mode's two states
+/// W(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2). linear_block's G_c (d + (1 - d) W) (1 - rho) + rho G_c(0) W, with
+/// G_c = G + creep, is (1 - rho) d G_c + W v, v = (1 - rho) (1 - d) y_c + rho G_c(0) w: one mode driven by v.
+/// A change of G's states alone (slow_mode on G's own realisation) then moves G's slow pole alone.
+StateSpace realize_in_parts(const TransferFunction& G, bool creep, const std::array<double, kMaxEffectParams>& pc,
+                            bool mode, const std::array<double, kMaxEffectParams>& pm) {
+  const StateSpace g = realize(G, "model.G");
+  const auto branches = creep ? creep_branches(pc) : std::vector<std::pair<double, double>>{};
+  const int ng = g.order(), nc = ng + static_cast<int>(branches.size()), n = nc + (mode ? 2 : 0);
+  StateSpace ss;
+  ss.A = Eigen::MatrixXd::Zero(n, n);
+  ss.B = Eigen::VectorXd::Zero(n);
+  ss.C = Eigen::RowVectorXd::Zero(n);
+  ss.A.topLeftCorner(ng, ng) = g.A;
+  ss.B.head(ng) = g.B;
+  ss.C.head(ng) = g.C;
+  ss.D = g.D;
+  double dc = G.dc_gain();  // G_c(0)
+  for (size_t i = 0; i < branches.size(); ++i) {
+    const auto [fraction, tau] = branches[i];
+    const Eigen::Index k = ng + static_cast<Eigen::Index>(i);
+    ss.A(k, k) = -1.0 / tau;
+    ss.B(k) = fraction * G.dc_gain() / tau;
+    ss.C(k) = 1.0;
+    dc += fraction * G.dc_gain();
+  }
+  if (!mode) return ss;
+  const double wn = 2.0 * std::numbers::pi * pm[0], direct = pm[2], rho = pm[3];
+  const double drive = (1.0 - rho) * (1.0 - direct);  // v's share of y_c
+  // W's states (p, p'): p'' = -wn^2 p - 2 zeta wn p' + wn^2 v, v = drive (C_c x + D_c w) + rho dc w.
+  ss.A(nc, nc + 1) = 1.0;
+  ss.A(nc + 1, nc) = -wn * wn;
+  ss.A(nc + 1, nc + 1) = -2.0 * pm[1] * wn;
+  ss.A.block(nc + 1, 0, 1, nc) = wn * wn * drive * ss.C.head(nc);
+  ss.B(nc + 1) = wn * wn * (drive * ss.D + rho * dc);
+  ss.C.head(nc) *= (1.0 - rho) * direct;
+  ss.C(nc) = 1.0;
+  ss.D *= (1.0 - rho) * direct;
+  return ss;
 }
 
 }  // namespace
@@ -263,7 +315,6 @@ void validate(const Effect& e, double Ts, const std::string& key) {
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {
   int count = 0, time_scaling = 0;
-  std::string slow_pole_only;  // the effect that moves G's slow pole alone, if any
   std::array<bool, kEffectKindNames.size()> seen{};
   for (const auto& e : effects) {
     if (e.kind == EffectKind::none) continue;
@@ -272,11 +323,7 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
       throw ConfigError(key, "effect '" + std::string(to_string(e.kind)) + "' given twice");
     seen[static_cast<size_t>(e.kind)] = true;
     time_scaling += e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics;
-    if (moves_slow_pole_only(e)) slow_pole_only = std::string(to_string(e.kind));
   }
-  // Their poles join G's in one linear block, where G's slow mode is no longer its own.
-  if (!slow_pole_only.empty() && (seen[static_cast<size_t>(EffectKind::creep)] || seen[static_cast<size_t>(EffectKind::resonance)]))
-    throw ConfigError(key, slow_pole_only + " with slow_pole_only = 1 runs without creep and resonance");
   if (count > kMaxEffects)
     throw ConfigError(key, "at most " + std::to_string(kMaxEffects) + " effects run together, got " + std::to_string(count));
   if (time_scaling > 1)
@@ -303,9 +350,14 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   if (has(EffectKind::hysteresis)) play_r_ = play_thresholds(p(EffectKind::hysteresis)[1], p(EffectKind::hysteresis)[2]);
   // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
   if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
-  const auto ss = realize(linear_block(model.G, has(EffectKind::creep), p(EffectKind::creep), has(EffectKind::resonance),
-                                       p(EffectKind::resonance)),
-                          "model.G");
+  // G's slow pole moved alone beside creep or a mode: a block realised in parts keeps G's states its own.
+  const bool slow_only = time_scaling_ != EffectKind::none && moves_slow_pole_only({time_scaling_, p(time_scaling_)});
+  const bool in_parts = slow_only && (has(EffectKind::creep) || has(EffectKind::resonance));
+  const auto ss = in_parts ? realize_in_parts(model.G, has(EffectKind::creep), p(EffectKind::creep), has(EffectKind::resonance),
+                                              p(EffectKind::resonance))
+                           : realize(linear_block(model.G, has(EffectKind::creep), p(EffectKind::creep),
+                                                  has(EffectKind::resonance), p(EffectKind::resonance)),
+                                     "model.G");
   if (ss.order() > kMaxOrder) throw ConfigError("model.G", "order above " + std::to_string(kMaxOrder));
   if (time_scaling_ == EffectKind::asymmetric_dynamics) {
     scale_grid_ = {1.0, 1.0 + p(EffectKind::asymmetric_dynamics)[0]};
@@ -316,9 +368,10 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     scale_grid_ = {1.0};
   }
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
-  const bool slow_only = time_scaling_ != EffectKind::none && moves_slow_pole_only({time_scaling_, p(time_scaling_)});
-  const auto slow =
-      slow_only ? slow_mode(ss, model.G, "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only") : SlowMode{};
+  const std::string slow_key = "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only";
+  const auto slow = !slow_only ? SlowMode{}
+                    : in_parts ? slow_mode_in_parts(realize(model.G, "model.G"), model.G, ss.order(), slow_key)
+                               : slow_mode(ss, model.G, slow_key);
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
     if (slow_only) {

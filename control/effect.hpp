@@ -258,7 +258,9 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the
 ///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V));
 ///    slow_pole_only 1: only G's slowest real pole moves, its mode's DC gain kept (the fast dynamics do not
-///    depend on the bias), 0 (the default): all of G's time constants.
+///    depend on the bias), 0 (the default): all of G's time constants. Beside creep or a mode the slow pole is
+///    G's own: the block then runs G, the creep branches and the mode as separate states (the same transfer
+///    function), and only G's slow mode moves, the creep's and the mode's poles staying where they are.
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:

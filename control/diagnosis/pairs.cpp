@@ -25,6 +25,15 @@ bool can_stand_in_for(EffectKind k, const std::string& parameter) {
   return k == asymmetric_dynamics || k == bias_dependent_dynamics || k == creep || k == resonance || k == delay;
 }
 
+/// Whether one of `a`, `b` moves G's slow pole alone and the other is creep or a mode (a block realised in
+/// parts, AugmentedPlant). Such a pair joins the runners-up's pairs without taking one's place: in a place it
+/// displaced the runner-up that the pair test named on two evaluation mixtures (case105's drift beside a mode,
+/// case132's saturation beside bias-dependent dynamics).
+bool slow_pole_beside_a_linear_part(const Effect& a, const Effect& b) {
+  const auto linear_part = [](const Effect& e) { return e.kind == EffectKind::creep || e.kind == EffectKind::resonance; };
+  return (moves_slow_pole_only(a) && linear_part(b)) || (moves_slow_pole_only(b) && linear_part(a));
+}
+
 /// A second effect's start: its grid point, and the nominal refit it scored best with.
 struct SecondStart {
   Effect effect;
@@ -138,9 +147,9 @@ void add_unscaled_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res,
 /// The pairs worth fitting: with o.forward_pairs, the forward selection's best second effects; then the
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
-/// leader's residual is weak) when not already among them. A forward kind whose own fit cannot run
-/// beside the leader in the form it chose (asymmetric or bias-dependent dynamics on G's slow pole alone beside
-/// creep or a mode) starts from its grid point alone.
+/// leader's residual is weak) when not already among them, and those on G's slow pole alone beside creep or a
+/// mode on the way (slow_pole_beside_a_linear_part). A forward kind whose own fit cannot run beside the leader
+/// in the form it chose (two effects that both change G's time scale) starts from its grid point alone.
 std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                  const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
@@ -162,8 +171,11 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
       else
         add(g.effect, {});
     }
-  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i)
-    added += add(res.candidates[i].effect, {}) ? 1 : 0;
+  for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i) {
+    const Effect& b = res.candidates[i].effect;
+    if (slow_pole_beside_a_linear_part(a.effect, b)) add(b, {});  // beside the runners-up, not in one's place
+    else added += add(b, {}) ? 1 : 0;
+  }
   add_mode_plan(out, res, problem, data, scale, o);
   add_unscaled_plan(out, res, problem, data, scale, o);
   return out;
