@@ -121,13 +121,13 @@ TransferFunction linear_block(const TransferFunction& G, bool creep, const std::
 }
 
 /// The same linear block as linear_block's, realised in parts so that G's states stay G's own: G's realisation
-/// first, then each creep branch's state (fraction G(0) / (tau s + 1), in parallel), then the mode's two states
+/// `g` first, then each creep branch's state (fraction G(0) / (tau s + 1), in parallel), then the mode's two states
 /// W(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2). linear_block's G_c (d + (1 - d) W) (1 - rho) + rho G_c(0) W, with
 /// G_c = G + creep, is (1 - rho) d G_c + W v, v = (1 - rho) (1 - d) y_c + rho G_c(0) w: one mode driven by v.
 /// A change of G's states alone (slow_mode on G's own realisation) then moves G's slow pole alone.
-StateSpace realize_in_parts(const TransferFunction& G, bool creep, const std::array<double, kMaxEffectParams>& pc,
-                            bool mode, const std::array<double, kMaxEffectParams>& pm) {
-  const StateSpace g = realize(G, "model.G");
+StateSpace realize_in_parts(const TransferFunction& G, const StateSpace& g, bool creep,
+                            const std::array<double, kMaxEffectParams>& pc, bool mode,
+                            const std::array<double, kMaxEffectParams>& pm) {
   const auto branches = creep ? creep_branches(pc) : std::vector<std::pair<double, double>>{};
   const int ng = g.order(), nc = ng + static_cast<int>(branches.size()), n = nc + (mode ? 2 : 0);
   StateSpace ss;
@@ -353,8 +353,9 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   // G's slow pole moved alone beside creep or a mode: a block realised in parts keeps G's states its own.
   const bool slow_only = time_scaling_ != EffectKind::none && moves_slow_pole_only({time_scaling_, p(time_scaling_)});
   const bool in_parts = slow_only && (has(EffectKind::creep) || has(EffectKind::resonance));
-  const auto ss = in_parts ? realize_in_parts(model.G, has(EffectKind::creep), p(EffectKind::creep), has(EffectKind::resonance),
-                                              p(EffectKind::resonance))
+  const auto g_own = in_parts ? realize(model.G, "model.G") : StateSpace{};
+  const auto ss = in_parts ? realize_in_parts(model.G, g_own, has(EffectKind::creep), p(EffectKind::creep),
+                                              has(EffectKind::resonance), p(EffectKind::resonance))
                            : realize(linear_block(model.G, has(EffectKind::creep), p(EffectKind::creep),
                                                   has(EffectKind::resonance), p(EffectKind::resonance)),
                                      "model.G");
@@ -370,7 +371,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
   const std::string slow_key = "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only";
   const auto slow = !slow_only ? SlowMode{}
-                    : in_parts ? slow_mode_in_parts(realize(model.G, "model.G"), model.G, ss.order(), slow_key)
+                    : in_parts ? slow_mode_in_parts(g_own, model.G, ss.order(), slow_key)
                                : slow_mode(ss, model.G, slow_key);
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;

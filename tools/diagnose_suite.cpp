@@ -219,8 +219,7 @@ struct CaseOutcome {
   std::string at_bounds;  ///< the nominal refit's parameters at their tolerance (NominalRefit::at_bounds), comma-separated
   std::string withheld;   ///< DiagnosisResult::withheld_second
   std::string ambiguous;  ///< DiagnosisResult::ambiguous_with, '+'-separated
-  std::string best_pair;  ///< the best pair fitted (SecondEffectTest::effects), '+'-separated; empty: none fitted
-  std::vector<std::string> pair_shortfalls;  ///< second_effect_shortfalls of that pair
+  SecondEffectTest pair;  ///< DiagnosisResult::second_effect_test: the best pair fitted and its test
   bool widened = false;   ///< NominalRefit::widened
   double ratio = NAN, ratio_aligned = NAN, seconds = 0.0;
   double nominal_held_out_over_noise = NAN;  ///< the nominal's held-out RMSE over the estimated noise
@@ -261,8 +260,7 @@ CaseOutcome run_case(const std::filesystem::path& dir, int threads) {
     o.at_bounds = join(d.nominal_refit.at_bounds, ",");
     o.withheld = d.withheld_second;
     o.ambiguous = join(d.ambiguous_with, "+");
-    o.best_pair = join(d.second_effect_test.effects, "+");
-    o.pair_shortfalls = second_effect_shortfalls(d.second_effect_test);
+    o.pair = d.second_effect_test;
     o.widened = d.nominal_refit.widened();
   } catch (const std::exception& e) {
     o.verdict = "error";
@@ -291,9 +289,10 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
 /// leading candidates and the marks (widened, refit at bound, withheld second, ambiguous, error).
 std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
   const bool missed_mixture = c.effects.find('+') != std::string::npos && !scored_right(c, o);
-  const std::string pair = !missed_mixture        ? ""
-                           : o.best_pair.empty() ? "  no pair fitted"
-                                                 : "  best pair: " + o.best_pair + " (" + join(o.pair_shortfalls, ", ") + ")";
+  const std::string pair = !missed_mixture         ? ""
+                           : o.pair.effects.empty() ? "  no pair fitted"
+                                                    : "  best pair: " + join(o.pair.effects, "+") + " (" +
+                                                          join(second_effect_shortfalls(o.pair), ", ") + ")";
   char line[1024];
   std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s%s\n",
                 c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
@@ -340,20 +339,15 @@ void tally_single(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutc
 
 /// Adds a mixture without both effects named to the breakdown by its best pair.
 void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
-  if (o.best_pair.empty() || o.verdict == "error") {
+  if (o.pair.effects.empty() || o.verdict == "error") {
     ++r.mixture_missed_no_pair;
-  } else if (!names_both(o.best_pair, c.effects)) {
+  } else if (!names_both(join(o.pair.effects, "+"), c.effects)) {
     ++r.mixture_missed_other_pair;
   } else {
     ++r.mixture_missed_labels_pair;
-    for (const auto& why : o.pair_shortfalls) {
-      // "X not significant" counts by which member: the labels' dominant or the other.
-      const auto cut = why.find(" not significant");
-      const std::string key = cut == std::string::npos ? why
-                              : why.substr(0, cut) == c.dominant ? "the dominant not significant"
-                                                                 : "the other not significant";
-      ++r.mixture_labels_pair_shortfalls[key];
-    }
+    // A member not significant counts by which it is: the labels' dominant or the other.
+    const auto role = [&](size_t i) { return o.pair.effects[i] == c.dominant ? "the dominant" : "the other"; };
+    for (const auto& why : second_effect_shortfalls(o.pair, {role(0), role(1)})) ++r.mixture_labels_pair_shortfalls[why];
   }
 }
 

@@ -346,11 +346,11 @@ std::vector<std::string> static_curve_off(const NominalRefit& r) {
 
 }  // namespace
 
-std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test) {
+std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test, std::array<std::string, 2> members) {
   std::vector<std::string> out;
   if (test.named || test.effects.size() != 2) return out;
   for (size_t i = 0; i < 2; ++i)
-    if (!test.member[i].significant) out.push_back(test.effects[i] + " not significant");
+    if (!test.member[i].significant) out.push_back((members[i].empty() ? test.effects[i] : members[i]) + " not significant");
   if (!test.explained) out.emplace_back("the pair leaves over half the excess");
   if (!test.material) out.emplace_back("not material");
   if (out.empty()) out.emplace_back("withheld");

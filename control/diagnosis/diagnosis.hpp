@@ -299,8 +299,10 @@ double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
 
 /// What kept the best pair's second effect out of the mixture, one phrase each ("saturation not significant",
 /// "the pair leaves over half the excess", "not material", or "withheld" when every test passed): empty when
-/// both were named or no pair was fitted.
-std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test);
+/// both were named or no pair was fitted. `members` names the two members in the phrases (default: their
+/// effects; the suite names them by the labels, "the dominant" and "the other").
+std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test,
+                                                  std::array<std::string, 2> members = {});
 
 /// The name of a loop's start (CandidateResult::loop_memory): "rising", "falling", "virgin", or "partway
 /// rising" / "partway falling" (a share of the widest play's width, AugmentedPlant::set_loop_memory).

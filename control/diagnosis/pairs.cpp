@@ -331,8 +331,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
     std::swap(test.member[0], test.member[1]);
   }
   test.effects = {std::string(to_string(pair.effects[0].kind)), std::string(to_string(pair.effects[1].kind))};
-  test.rmse_validation_um = pair.errors.rmse_validation_um;
-  test.named = ok;
+  test.rmse_validation_um = pair.errors.rmse_validation_um;  // `named`: decide, after withhold_second
   if (ok) res.contribution = {std::max(c0, c1), std::min(c0, c1)};
   return ok;
 }
