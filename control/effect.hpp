@@ -353,6 +353,10 @@ class AugmentedPlant final {
   Vector rest_B_;
   LinearStep linear_step_ = nullptr;
   double dc_gain_ = 0.0, y_ref_ = 1.0;
+  double inverse_y_ref_ = 1.0;  ///< a product on the state's chain, not a division (latency)
+  /// The linear block's own DC gain (G's with creep's slow gain): what y_lin_ settles to per unit drive, the
+  /// target asymmetric dynamics compare it with.
+  double block_dc_gain_ = 0.0;
   /// The delayed commands, a power of two long (at least the whole delay plus two, sized at construction).
   std::vector<double> delay_line_;
   size_t head_ = 0;

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <numbers>
@@ -432,6 +433,23 @@ TEST(AugmentedPlant, AsymmetricDynamicsOnTheSlowPoleAloneSlowOnlyItsRelaxation) 
               "poles slowed (span %.1f um)\n", largest_error, largest_gap_to_all, span_um);
   EXPECT_LT(largest_error, 1e-6 * span_um);  // two exact discretisations, no interpolation
   EXPECT_GT(largest_gap_to_all, 0.01 * span_um);  // and it is not the all-poles form
+}
+
+TEST(AugmentedPlant, AsymmetricDynamicsBesideCreepRiseAllTheWayToTheBlocksGain) {
+  // Creep adds 20% slow gain: the block settles at 1.2 G(0) f. A monotone rise is rising until it arrives,
+  // so it is creep alone's rise; compared with G(0) f, it turned "relaxing" at 1/1.2 of the way.
+  const auto u = steps(20000, 100.0, 400.0);
+  const Effect creep{EffectKind::creep, {0.2, 3.0}};
+  const auto alone = run(creep, u, 100.0);
+  ASSERT_TRUE(std::is_sorted(alone.begin(), alone.end())) << "the reference rise is not monotone";
+  for (double slow_pole_only : {0.0, 1.0}) {
+    const std::vector<Effect> both{{EffectKind::asymmetric_dynamics, {1.0, slow_pole_only}}, creep};
+    AugmentedPlant plant(paper_model(3), 1, Ts, both);
+    const auto y = plant.simulate(u, 100.0);
+    double worst = 0.0;
+    for (size_t k = 0; k < y.size(); ++k) worst = std::max(worst, std::abs(y[k] - alone[k]));
+    EXPECT_LT(worst, 1e-9 * (alone.back() - alone.front())) << "slow_pole_only " << slow_pole_only;
+  }
 }
 
 TEST(Effect, OnlyASlowRealPoleMovesAlone) {
