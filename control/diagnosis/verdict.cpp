@@ -1,5 +1,6 @@
 #include "control/diagnosis/verdict.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -51,6 +52,40 @@ void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisO
   }
   if (!res.ambiguous_with.empty())
     res.separating_experiment = separating_experiment(best.effect.kind, *parse_effect_kind(res.ambiguous_with.front()));
+}
+
+/// A drift is told from a slow transient that follows the input (creep settling after the first level, a loop's
+/// memory of a level held before the recording fading as the input moves) by a hold: it goes on while the
+/// voltage stands still, the others do not. Shorter holds than this do not separate them.
+constexpr double kSeparatingHold_s = 2.0;
+
+/// The longest stretch of any recording whose voltage stays within 1% of that recording's span of its first
+/// value, in seconds.
+double longest_hold_s(const std::vector<Series>& data) {
+  double longest = 0.0;
+  for (const auto& s : data) {
+    if (s.u_V.empty()) continue;
+    const auto [lo, hi] = voltage_range(s);
+    const double still = 0.01 * (hi - lo);
+    size_t start = 0;
+    for (size_t k = 1; k <= s.u_V.size(); ++k)
+      if (k == s.u_V.size() || std::abs(s.u_V[k] - s.u_V[start]) > still) {
+        longest = std::max(longest, static_cast<double>(k - 1 - start) * s.sample_time_s);
+        start = k;
+      }
+  }
+  return longest;
+}
+
+/// What a drift verdict cannot rule out when no recording holds the voltage (kSeparatingHold_s); empty otherwise.
+std::string drift_without_hold_text(const DiagnosisResult& res, const std::vector<Series>& data) {
+  if (res.chosen != EffectKind::drift) return "";
+  const double hold_s = longest_hold_s(data);
+  if (hold_s >= kSeparatingHold_s) return "";
+  return format(" No recording holds the voltage still (the longest hold is %.2g s): a slow transient that follows "
+                "the input, such as creep settling after the first level or a loop's memory of a level held before "
+                "the recording, can look like this drift. To tell them apart, hold the voltage for several seconds "
+                "at two levels (a drift goes on during a hold; creep settles; a loop does not move).", hold_s);
 }
 
 /// The verdict's fields from the chosen effects, and the nominal refit and offset as fitted jointly with
@@ -166,7 +201,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     res.verdict = "unexplained";
   }
   explain_candidates(res);
-  res.explanation = explain_verdict(res, excess, pair_ok);
+  res.explanation = explain_verdict(res, excess, pair_ok) + drift_without_hold_text(res, data);
 }
 
 /// `none` when the level test passes and the residual is white, or its excess is under a tenth of the

@@ -365,6 +365,24 @@ TEST(Diagnose, LocatesAMismatchOnlyWhereItIs) {
   EXPECT_EQ(r.verdict, "drift") << r.explanation;
 }
 
+TEST(Diagnose, ADriftWithoutAHoldSaysThatAHoldWouldTellItFromASlowTransient) {
+  const Effect drift{EffectKind::drift, {0.0, 0.1, 12.0}};
+  const auto moving = diagnose(paper_model(3), {recording(drift, 0.05)});  // the multisine never stands still
+  ASSERT_EQ(moving.verdict, "drift") << moving.explanation;
+  EXPECT_NE(moving.explanation.find("No recording holds the voltage still"), std::string::npos) << moving.explanation;
+  // The same drift where the recording starts with 5 s at 300 V, then 5 s at 420 V, then the multisine.
+  auto held = recording(drift, 0.05);
+  for (size_t k = 0; k < 10000; ++k) held.u_V[k] = k < 5000 ? 300.0 : 420.0;
+  AugmentedPlant plant(paper_model(3), 1, Ts, drift);
+  held.y_um = plant.simulate(held.u_V, held.u_V[0]);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  for (double& y : held.y_um) y += noise(rng);
+  const auto r = diagnose(paper_model(3), {held});
+  ASSERT_EQ(r.verdict, "drift") << r.explanation;
+  EXPECT_EQ(r.explanation.find("holds the voltage"), std::string::npos) << r.explanation;
+}
+
 TEST(Diagnose, ADriftsOffsetIsTheSensorOffsetNotAnEffectParameter) {
   // A ramp from 12 s read through a sensor 20 um off: the offset is each recording's, solved with the other
   // nuisances; a drift offset beside it has no data of its own and, fitted, wandered off (-118 um beside
