@@ -392,7 +392,8 @@ std::string second_effect_test_json(const SecondEffectTest& t) {
       << ", \"significant\": " << (m.significant ? "true" : "false") << "}";
   }
   j << "], \"explains_excess\": " << (t.explained ? "true" : "false") << ", \"material\": " << (t.material ? "true" : "false")
-    << ", \"named\": " << (t.named ? "true" : "false") << "}";
+    << ", \"named\": " << (t.named ? "true" : "false") << ", \"single_over_noise\": " << number_or_null(t.single_over_noise)
+    << "}";
   return j.str();
 }
 
@@ -563,6 +564,7 @@ std::string second_effect_test_line(const SecondEffectTest& t) {
       << " against " << number_or_null(m.threshold, "%.2f") << ", signed-rank p " << number_or_null(m.signed_rank_p, "%.2g") << ", "
       << m.blocks << " blocks: " << (m.significant ? "significant" : "not significant") << ");";
   }
+  if (t.single_over_noise > 0.0) s << " the best single effect alone leaves " << format("%.3g", t.single_over_noise) << "x the noise;";
   return s.str() + (t.named ? " both named" : " not named (" + join(second_effect_shortfalls(t), ", ") + ")");
 }
 

@@ -341,7 +341,10 @@ void tally_single(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutc
 void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o) {
   if (o.pair.effects.empty() || o.verdict == "error") {
     ++r.mixture_missed_no_pair;
-  } else if (!names_both(join(o.pair.effects, "+"), c.effects)) {
+    return;
+  }
+  r.mixture_missed_single_at_noise += o.pair.single_over_noise > 0.0 && o.pair.single_over_noise <= kSingleAtTheNoise;
+  if (!names_both(join(o.pair.effects, "+"), c.effects)) {
     ++r.mixture_missed_other_pair;
   } else {
     ++r.mixture_missed_labels_pair;
@@ -453,9 +456,11 @@ std::string mixtures_missed(const DirectorySuiteResult& r) {
   if (missed == 0) return "";
   std::string why;
   for (const auto& [reason, n] : r.mixture_labels_pair_shortfalls) why += format("%s%s %d", why.empty() ? "" : ", ", reason.c_str(), n);
-  return format("mixtures without both named (%d), by the best pair fitted: another pair %d, none fitted %d, the labels' pair %d%s%s%s\n",
+  return format("mixtures without both named (%d), by the best pair fitted: another pair %d, none fitted %d, the labels' pair %d%s%s%s; "
+                "the best single effect alone at the noise (held-out RMSE within %.0f%% of it) in %d\n",
                 missed, r.mixture_missed_other_pair, r.mixture_missed_no_pair, r.mixture_missed_labels_pair,
-                why.empty() ? "" : " (", why.c_str(), why.empty() ? "" : ")");
+                why.empty() ? "" : " (", why.c_str(), why.empty() ? "" : ")", 100.0 * (kSingleAtTheNoise - 1.0),
+                r.mixture_missed_single_at_noise);
 }
 
 }  // namespace

@@ -81,6 +81,8 @@ struct DirectorySuiteResult {
   /// no pair fitted, another pair than the labels', or the labels' pair with what kept its second effect out
   /// (second_effect_shortfalls; a case with several counts under each).
   int mixture_missed_no_pair = 0, mixture_missed_other_pair = 0, mixture_missed_labels_pair = 0;
+  /// Of those with a pair fitted, how many had their best single effect at the noise already (kSingleAtTheNoise).
+  int mixture_missed_single_at_noise = 0;
   std::map<std::string, int> mixture_labels_pair_shortfalls;
   /// Single effects by the labels' `form` column (the generator's own form of the effect, when the labels
   /// have one), as "effect/form": {right, cases}. Which forms the candidates miss, without reading the labels.

@@ -182,7 +182,13 @@ struct SecondEffectTest {
   bool explained = false;  ///< the pair leaves at most DiagnosisOptions::explained_excess of the excess
   bool material = false;   ///< each member removes enough of what the other leaves (DiagnosisOptions::mixture_gain)
   bool named = false;      ///< both named (false also when the second was withheld: DiagnosisResult::withheld_second)
+  /// The best single effect's held-out RMSE over the estimated noise (0: none fitted). Within
+  /// kSingleAtTheNoise the held-out data hold nothing a second effect could remove, so none can be significant.
+  double single_over_noise = 0.0;
 };
+
+/// A best single effect whose held-out RMSE is within this factor of the noise leaves no room for a second.
+inline constexpr double kSingleAtTheNoise = 1.05;
 
 /// The outcome.
 struct DiagnosisResult {
@@ -298,7 +304,8 @@ HeldOutTest held_out_improvement(const std::vector<Series>& data, const std::vec
 double excess_share_left(const DiagnosisResult& res, const ModelErrors& e);
 
 /// What kept the best pair's second effect out of the mixture, one phrase each ("saturation not significant",
-/// "the pair leaves over half the excess", "not material", or "withheld" when every test passed): empty when
+/// "the pair leaves over half the excess", "not material", or "withheld" when every test passed), and "the best
+/// single effect alone at the noise" beside them (SecondEffectTest::single_over_noise): empty when
 /// both were named or no pair was fitted. `members` names the two members in the phrases (default: their
 /// effects; the suite names them by the labels, "the dominant" and "the other").
 std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test,

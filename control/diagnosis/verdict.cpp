@@ -189,6 +189,8 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, problem, data, scale, o);
   res.second_effect_test.named = pair_ok;
+  if (best.fitted && res.noise_sigma_um > 0.0)
+    res.second_effect_test.single_over_noise = best.errors.rmse_validation_um / res.noise_sigma_um;
   if (pair_ok) {
     res.fitted = pair.errors;
     set_verdict(res, problem, pair.effects, pair.nominal, o);

@@ -17,6 +17,7 @@
 #include "control/config/effect_config.hpp"
 #include "control/diagnosis/generator.hpp"
 #include "control/simulated_rig.hpp"
+#include "control/text_format.hpp"
 #include "daemon/daemon_config.hpp"
 #include "tools/diagnose_suite.hpp"
 #include "tools/recording.hpp"
@@ -425,6 +426,11 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
   EXPECT_NE(o.summary.find("best pair: hysteresis + dead_zone"), std::string::npos) << o.summary;
   EXPECT_NE(o.summary.find("not named (withheld)"), std::string::npos) << o.summary;
   EXPECT_NE(read(a.json).find("\"second_effect_test\": {\"effects\": [\"hysteresis\", \"dead_zone\"]"), std::string::npos);
+  // The best single effect's held-out RMSE over the noise, in both.
+  EXPECT_GT(t.single_over_noise, 0.0) << o.summary;
+  EXPECT_NE(o.summary.find("the best single effect alone leaves " + control::format("%.3g", t.single_over_noise) + "x the noise"),
+            std::string::npos) << o.summary;
+  EXPECT_NE(read(a.json).find("\"single_over_noise\": "), std::string::npos);
 }
 
 /// Both effects of a pair named, dominant first, with its nominal refit stopped at f's shape and nothing withheld.
@@ -552,9 +558,11 @@ TEST(DiagnoseIndependentSuite, MixturesLeftUnnamedAreCountedByTheBestPairAndWhat
   r.mixture_missed_no_pair = 1;
   r.mixture_missed_labels_pair = 2;
   r.mixture_labels_pair_shortfalls = {{"the other not significant", 2}, {"not material", 1}};
+  r.mixture_missed_single_at_noise = 2;
   const auto text = format_directory_suite(r);
   EXPECT_NE(text.find("mixtures without both named (6), by the best pair fitted: another pair 3, none fitted 1, the labels' "
-                      "pair 2 (not material 1, the other not significant 2)"),
+                      "pair 2 (not material 1, the other not significant 2); the best single effect alone at the noise "
+                      "(held-out RMSE within 5% of it) in 2"),
             std::string::npos)
       << text;
   r.mixture_missed_other_pair = r.mixture_missed_no_pair = r.mixture_missed_labels_pair = 0;  // all named: no line

@@ -383,6 +383,25 @@ TEST(Diagnose, ADriftWithoutAHoldSaysThatAHoldWouldTellItFromASlowTransient) {
   EXPECT_EQ(r.explanation.find("holds the voltage"), std::string::npos) << r.explanation;
 }
 
+TEST(Diagnose, ASecondEffectBesideASingleEffectAtTheNoiseIsSaidToHaveNoRoom) {
+  // A drift alone, 0.05 um of noise: the drift leaves the held-out data at the noise, so whatever the best
+  // pair adds cannot be significant, and the reason says why.
+  const auto r = diagnose(paper_model(3), {recording({EffectKind::drift, {0.0, 0.1, 12.0}}, 0.05)});
+  ASSERT_EQ(r.verdict, "drift") << r.explanation;
+  auto t = r.second_effect_test;
+  ASSERT_EQ(t.effects.size(), 2u) << "no pair fitted";
+  EXPECT_FALSE(t.named);
+  EXPECT_NEAR(t.single_over_noise, r.candidates.front().errors.rmse_validation_um / r.noise_sigma_um, 1e-12);
+  EXPECT_LE(t.single_over_noise, kSingleAtTheNoise);
+  const std::string no_room = "the best single effect alone at the noise";
+  auto why = second_effect_shortfalls(t);
+  EXPECT_NE(std::find(why.begin(), why.end(), no_room), why.end());
+  t.single_over_noise = 1.2;  // room left: not that reason
+  why = second_effect_shortfalls(t);
+  EXPECT_EQ(std::find(why.begin(), why.end(), no_room), why.end());
+  EXPECT_FALSE(why.empty());  // the member tests still say what failed
+}
+
 TEST(Diagnose, ADriftsOffsetIsTheSensorOffsetNotAnEffectParameter) {
   // A ramp from 12 s read through a sensor 20 um off: the offset is each recording's, solved with the other
   // nuisances; a drift offset beside it has no data of its own and, fitted, wandered off (-118 um beside
