@@ -343,7 +343,7 @@ void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const 
     ++r.mixture_missed_no_pair;
     return;
   }
-  r.mixture_missed_single_at_noise += o.pair.single_over_noise > 0.0 && o.pair.single_over_noise <= kSingleAtTheNoise;
+  r.mixture_missed_single_at_noise += o.pair.single_at_the_noise();
   if (!names_both(join(o.pair.effects, "+"), c.effects)) {
     ++r.mixture_missed_other_pair;
   } else {

@@ -354,8 +354,7 @@ std::vector<std::string> second_effect_shortfalls(const SecondEffectTest& test, 
   if (!test.explained) out.emplace_back("the pair leaves over half the excess");
   if (!test.material) out.emplace_back("not material");
   if (out.empty()) out.emplace_back("withheld");
-  if (test.single_over_noise > 0.0 && test.single_over_noise <= kSingleAtTheNoise)
-    out.emplace_back("the best single effect alone at the noise");
+  if (test.single_at_the_noise()) out.emplace_back("the best single effect alone at the noise");
   return out;
 }
 

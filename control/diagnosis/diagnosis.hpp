@@ -185,10 +185,16 @@ struct SecondEffectTest {
   /// The best single effect's held-out RMSE over the estimated noise (0: none fitted). Within
   /// kSingleAtTheNoise the held-out data hold nothing a second effect could remove, so none can be significant.
   double single_over_noise = 0.0;
+  /// The best single effect leaves the held-out data at the noise (single_over_noise within kSingleAtTheNoise).
+  [[nodiscard]] bool single_at_the_noise() const noexcept;
 };
 
 /// A best single effect whose held-out RMSE is within this factor of the noise leaves no room for a second.
 inline constexpr double kSingleAtTheNoise = 1.05;
+
+inline bool SecondEffectTest::single_at_the_noise() const noexcept {
+  return single_over_noise > 0.0 && single_over_noise <= kSingleAtTheNoise;
+}
 
 /// The outcome.
 struct DiagnosisResult {
