@@ -281,8 +281,8 @@ const std::vector<Problem::Basis>& Problem::basis(double k, bool wander) {
   return out;
 }
 
-Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain, bool wander) {
-  const auto& basis_r = basis(k, wander);
+Problem::Projection Problem::fit_projection(const std::vector<std::vector<double>>& yhat, const std::vector<Basis>& basis_r,
+                                            bool fit_gain) const {
   const size_t R = data_.size();
   std::vector<Eigen::VectorXd> u_h(R);
   double num = 0.0, den = 0.0;
@@ -305,24 +305,54 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     num += hy - ph.dot(basis_r[r].data_coefficients);
     den += hh - ph.dot(u_h[r]);
   }
-  Prediction p;
+  Projection p;
   p.gain = fit_gain && den > 0.0 ? std::clamp(num / den, gain_.first, gain_.second) : 1.0;
-  std::vector<Eigen::VectorXd> coefficients;
-  for (size_t r = 0; r < R; ++r) {
-    const auto& m = basis_r[r].modes;
-    const Eigen::VectorXd& c = coefficients.emplace_back(basis_r[r].data_coefficients - p.gain * u_h[r]);
+  for (size_t r = 0; r < R; ++r) p.coefficients.push_back(basis_r[r].data_coefficients - p.gain * u_h[r]);
+  return p;
+}
+
+void Problem::Basis::add_to(Eigen::Ref<Eigen::VectorXd> y, size_t first, const Eigen::VectorXd& c) const {
+  for (size_t j = 0; j < modes.size(); ++j) {
+    const auto at = within(first, first + static_cast<size_t>(y.size()), support[j]);
+    y.segment(static_cast<Eigen::Index>(at.first - first), static_cast<Eigen::Index>(at.second - at.first)) +=
+        c(static_cast<Eigen::Index>(j + 1)) * on(j, at);
+  }
+}
+
+Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, bool fit_gain, bool wander) {
+  const auto& basis_r = basis(k, wander);
+  auto [gain, coefficients] = fit_projection(yhat, basis_r, fit_gain);
+  Prediction p;
+  p.gain = gain;
+  for (size_t r = 0; r < data_.size(); ++r) {
+    const Eigen::VectorXd& c = coefficients[r];
     p.offset_um.push_back(c(0));
     Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
     y = (p.gain * y).array() + c(0);
-    for (size_t j = 0; j < m.size(); ++j) {
-      const auto at = within(0, static_cast<size_t>(y.size()), basis_r[r].support[j]);
-      y.segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first)) +=
-          c(static_cast<Eigen::Index>(j + 1)) * basis_r[r].on(j, at);
-    }
+    basis_r[r].add_to(y, 0, c);
   }
   if (wander) p.wander_um_per_sqrt_s = wander_size(basis_r, coefficients);
   p.y = std::move(yhat);
   return p;
+}
+
+// The prediction only on the fit samples, formed in place in the residual (the same operations, element by
+// element, as project's: a residual is most of a fit's cost beside the simulation).
+Eigen::VectorXd Problem::residual(std::span<const Effect> e, Nominal k) {
+  const auto yhat = raw(e, k, false);
+  const auto& basis_r = basis(k.time_scale, wanders(e));
+  const auto [gain, coefficients] = fit_projection(yhat, basis_r, true);
+  Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
+  Eigen::Index j = 0;
+  for (size_t r = 0; r < data_.size(); ++r)
+    for (const auto& [first, last] : fit_ranges_[r]) {
+      auto o = out.segment(j, static_cast<Eigen::Index>(last - first));
+      o = (gain * segment(yhat[r], first, last)).array() + coefficients[r](0);
+      basis_r[r].add_to(o, first, coefficients[r]);
+      o = segment(data_[r].y_um, first, last) - o;
+      j += o.size();
+    }
+  return out;
 }
 
 namespace {
@@ -354,9 +384,12 @@ using Residual = std::function<Eigen::VectorXd(const Eigen::VectorXd&)>;
 /// clamped away; a parameter set from the data (fixed) has a zero column.
 Eigen::MatrixXd difference_jacobian(const FitSpace& c, const Eigen::VectorXd& z, const Eigen::VectorXd& r,
                                     const Residual& residual) {
-  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(r.size(), z.size());
+  Eigen::MatrixXd J(r.size(), z.size());  // each column written once: no pass to zero it first
   for (Eigen::Index i = 0; i < z.size(); ++i) {
-    if (c.specs[static_cast<size_t>(i)].fixed) continue;
+    if (c.specs[static_cast<size_t>(i)].fixed) {
+      J.col(i).setZero();
+      continue;
+    }
     Eigen::VectorXd zh = z;
     const double h = 1e-3;
     zh(i) += h;

@@ -195,18 +195,7 @@ class Problem {
   }
 
   /// Fit-segment residual after the projection.
-  Eigen::VectorXd residual(std::span<const Effect> e, Nominal k) {
-    const auto p = predict(e, k, true, false);
-    Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
-    Eigen::Index j = 0;
-    for (size_t r = 0; r < data_.size(); ++r)
-      for (const auto& [first, last] : fit_ranges_[r]) {
-        const auto len = static_cast<Eigen::Index>(last - first);
-        out.segment(j, len) = segment(data_[r].y_um, first, last) - segment(p.y[r], first, last);
-        j += len;
-      }
-    return out;
-  }
+  Eigen::VectorXd residual(std::span<const Effect> e, Nominal k);
   [[nodiscard]] int simulations() const { return simulations_; }
   void add_simulations(int n) { simulations_ += n; }
   /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
@@ -243,7 +232,16 @@ class Problem {
     [[nodiscard]] auto on(size_t m, std::pair<size_t, size_t> at) const {
       return modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
     }
+    /// Adds the modes weighted by c (c(0), the offset, is not theirs) to y, samples [first, first + y.size()).
+    void add_to(Eigen::Ref<Eigen::VectorXd> y, size_t first, const Eigen::VectorXd& c) const;
   };
+  /// The projection's least-squares solution: the gain and, per recording, the offset then the modes' weights.
+  struct Projection {
+    double gain = 1.0;
+    std::vector<Eigen::VectorXd> coefficients;
+  };
+  [[nodiscard]] Projection fit_projection(const std::vector<std::vector<double>>& yhat, const std::vector<Basis>& basis_r,
+                                          bool fit_gain) const;
   /// Fills `b`'s Gram matrix of (1, modes) over `fit_ranges` and the coefficients that fit y_um alone.
   static void solve_gram(Basis& b, const std::vector<double>& y_um, const std::vector<std::pair<size_t, size_t>>& fit_ranges);
   const std::vector<Basis>& basis(double k, bool wander);
