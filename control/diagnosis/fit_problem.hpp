@@ -293,11 +293,17 @@ void run_each(std::string_view stage, size_t count, Problem& problem, const Diag
   problem.add_simulations(std::accumulate(added.begin(), added.end(), 0));
 }
 
+/// Levenberg-Marquardt stops when a step lowers the fit's cost by less than this share of it.
+constexpr double kFitTolerance = 1e-4;
+/// ... and fit_staged's first stage, which only prepares the second, at this share.
+constexpr double kBasinTolerance = 1e-3;
+
 /// Bounded Levenberg-Marquardt on the simulated output from z (fit coordinates); sets `cost` to the
 /// fit-segment sum of squares it reaches.
-Eigen::VectorXd levenberg_marquardt(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost);
+Eigen::VectorXd levenberg_marquardt(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost,
+                                    double relative_tolerance = kFitTolerance);
 
-/// Levenberg-Marquardt with f's added term held first, then everything free.
+/// Levenberg-Marquardt with f's added term held first (to kBasinTolerance), then everything free.
 Eigen::VectorXd fit_staged(Problem& problem, const FitSpace& c, Eigen::VectorXd z, double& cost);
 
 /// RMSE over all samples, over the fit segment and over the held-out data.
