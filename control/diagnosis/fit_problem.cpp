@@ -311,7 +311,9 @@ Problem::Projection Problem::fit_projection(const std::vector<std::vector<double
   return p;
 }
 
-void Problem::Basis::add_to(Eigen::Ref<Eigen::VectorXd> y, size_t first, const Eigen::VectorXd& c) const {
+void Problem::Basis::predict_in_place(Eigen::Ref<Eigen::VectorXd> y, size_t first, double gain,
+                                      const Eigen::VectorXd& c) const {
+  y = (gain * y).array() + c(0);
   for (size_t j = 0; j < modes.size(); ++j) {
     const auto at = within(first, first + static_cast<size_t>(y.size()), support[j]);
     y.segment(static_cast<Eigen::Index>(at.first - first), static_cast<Eigen::Index>(at.second - at.first)) +=
@@ -328,16 +330,15 @@ Prediction Problem::project(std::vector<std::vector<double>> yhat, double k, boo
     const Eigen::VectorXd& c = coefficients[r];
     p.offset_um.push_back(c(0));
     Eigen::Map<Eigen::VectorXd> y(yhat[r].data(), static_cast<Eigen::Index>(yhat[r].size()));
-    y = (p.gain * y).array() + c(0);
-    basis_r[r].add_to(y, 0, c);
+    basis_r[r].predict_in_place(y, 0, p.gain, c);
   }
   if (wander) p.wander_um_per_sqrt_s = wander_size(basis_r, coefficients);
   p.y = std::move(yhat);
   return p;
 }
 
-// The prediction only on the fit samples, formed in place in the residual (the same operations, element by
-// element, as project's: a residual is most of a fit's cost beside the simulation).
+// The prediction only on the fit samples, formed in the residual's own storage by project's
+// Basis::predict_in_place (so the same numbers): a residual is most of a fit's cost beside the simulation.
 Eigen::VectorXd Problem::residual(std::span<const Effect> e, Nominal k) {
   const auto yhat = raw(e, k, false);
   const auto& basis_r = basis(k.time_scale, wanders(e));
@@ -347,8 +348,8 @@ Eigen::VectorXd Problem::residual(std::span<const Effect> e, Nominal k) {
   for (size_t r = 0; r < data_.size(); ++r)
     for (const auto& [first, last] : fit_ranges_[r]) {
       auto o = out.segment(j, static_cast<Eigen::Index>(last - first));
-      o = (gain * segment(yhat[r], first, last)).array() + coefficients[r](0);
-      basis_r[r].add_to(o, first, coefficients[r]);
+      o = segment(yhat[r], first, last);
+      basis_r[r].predict_in_place(o, first, gain, coefficients[r]);
       o = segment(data_[r].y_um, first, last) - o;
       j += o.size();
     }

@@ -232,8 +232,9 @@ class Problem {
     [[nodiscard]] auto on(size_t m, std::pair<size_t, size_t> at) const {
       return modes[m].segment(static_cast<Eigen::Index>(at.first), static_cast<Eigen::Index>(at.second - at.first));
     }
-    /// Adds the modes weighted by c (c(0), the offset, is not theirs) to y, samples [first, first + y.size()).
-    void add_to(Eigen::Ref<Eigen::VectorXd> y, size_t first, const Eigen::VectorXd& c) const;
+    /// Turns y, a simulation's samples [first, first + y.size()), into the projection's prediction:
+    /// gain y + c(0) (the offset) + the modes weighted by c(1), c(2), ...
+    void predict_in_place(Eigen::Ref<Eigen::VectorXd> y, size_t first, double gain, const Eigen::VectorXd& c) const;
   };
   /// The projection's least-squares solution: the gain and, per recording, the offset then the modes' weights.
   struct Projection {
