@@ -34,11 +34,11 @@ bool can_run_together(const Effect& a, const Effect& b) {
   }
 }
 
-Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& scale, const DiagnosisOptions& o,
+Eigen::VectorXd start_at(const Effect& e, Nominal k, const DataScale& scale, const DiagnosisOptions& o,
                          const std::vector<Series>& data) {
   const auto z = FitSpace({e.kind}, scale, false, o, &data).z_of({e}, {});
-  Eigen::VectorXd start(z.size() + 1);
-  start << z, time_scale;
+  Eigen::VectorXd start(z.size() + kNominalParams);
+  start << z, k.time_scale, k.shape, k.next;
   return start;
 }
 
@@ -75,15 +75,16 @@ Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Ser
     // The two best grid points at G's time scale 1, and for a loop also at 0.4: a loop may take back a
     // large share of the nominal's lag (a much faster G), where other loop parameters fit best.
     for (double ts : kind == EffectKind::hysteresis ? std::vector<double>{1.0, 0.4} : std::vector<double>{1.0}) {
-      const auto grid = coarse_grid(space, [&](const Effect& e) { return own.residual({&e, 1}, ts).squaredNorm(); });
+      const Nominal k = start_nominal(res, {ts, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope});
+      const auto grid = coarse_grid(space, [&](const Effect& e) { return own.residual({&e, 1}, k).squaredNorm(); });
       if (ts == 1.0) {  // the evidence: at the nominal's time scale, as for every candidate
         evidence[i].specs = space.specs;
         evidence[i].evidence_r2 = std::max(0.0, 1.0 - grid.front().first / nuisance_cost);
         evidence[i].effect = space.effects(grid.front().second).front();
       }
       for (size_t g = 0; g < std::min<size_t>(grid.size(), 2); ++g) {
-        starts[i].emplace_back(grid[g].second.size() + 1);
-        starts[i].back() << grid[g].second, ts;
+        starts[i].emplace_back(grid[g].second.size() + kNominalParams);
+        starts[i].back() << grid[g].second, k.time_scale, k.shape, k.next;
       }
     }
   });
@@ -91,13 +92,15 @@ Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Ser
   return starts;
 }
 
-/// The second pass starts each candidate where the first pass fitted it (its evidence is the first
-/// pass's): one start each instead of the grid's two, a refit after a change of one sample of delay.
+/// A later pass starts each candidate where the earlier one fitted it (its evidence is the earlier pass's):
+/// one start each instead of the grid's two, a refit after a change of one sample of delay or of f's
+/// tolerances.
 Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& first, const std::vector<Series>& data,
                    const DataScale& scale, const DiagnosisOptions& o) {
   Starts starts;
   for (const auto& c : first) {
-    starts.push_back({start_at(c.effect, c.fitted ? c.time_scale : 1.0, scale, o, data)});
+    const Nominal refit{1.0, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope};
+    starts.push_back({start_at(c.effect, start_nominal(res, c.fitted ? nominal_of(c) : refit), scale, o, data)});
     res.candidates.push_back(c);
     res.candidates.back().fitted = false;
   }
@@ -198,8 +201,10 @@ struct StartFit {
 StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& problem, size_t recordings) {
   StartFit out;
   Eigen::VectorXd z(static_cast<Eigen::Index>(space.specs.size()));
-  z.head(s0.size() - 1) = s0.head(s0.size() - 1);
-  z.tail(kNominalParams) = space.z_of({space.effects(z).front()}, Nominal{s0(s0.size() - 1)}).tail(kNominalParams);
+  const Eigen::Index effect_params = s0.size() - kNominalParams;
+  z.head(effect_params) = s0.head(effect_params);
+  const Nominal k{s0(effect_params), s0(effect_params + 1), s0(effect_params + 2)};
+  z.tail(kNominalParams) = space.z_of({space.effects(z).front()}, k).tail(kNominalParams);
   const bool loop = space.kinds.front() == EffectKind::hysteresis;
   if (loop) choose_loop_memory(problem, space, z, recordings);
   z = fit_staged(problem, space, z, out.cost);
@@ -340,19 +345,19 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   lead_with_an_explanation(res, excess, o);
 }
 
-/// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit
-/// of the leading ones by evidence, ranked by held-out score.
+/// Every candidate's evidence and starts (the grid's, or `warm`'s fits), then the full fit of the leading
+/// ones by evidence, ranked by held-out score.
 void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
-                    const DiagnosisOptions& o, double nuisance_cost, const std::vector<CandidateResult>* warm) {
-  const Starts starts =
-      warm ? warm_starts(res, *warm, data, scale, o) : grid_starts(res, problem, data, scale, o, nuisance_cost);
+                    const DiagnosisOptions& o, double nuisance_cost, WarmStarts warm) {
+  const Starts starts = warm.candidates ? warm_starts(res, *warm.candidates, data, scale, o)
+                                        : grid_starts(res, problem, data, scale, o, nuisance_cost);
   std::vector<size_t> order(res.candidates.size());
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return res.candidates[a].evidence_r2 > res.candidates[b].evidence_r2; });
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
-  fit_each(warm ? "candidate fits at the new delay" : "candidate fits", res.candidates, order, starts, res.held_out,
-           problem, data, scale, o);
+  fit_each(warm.candidates ? warm.stage : "candidate fits", res.candidates, order, starts, res.held_out, problem, data,
+           scale, o);
   // What the loop's fit chose stays for the fits that follow (pairs with the loop).
   for (size_t i : order)
     if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);

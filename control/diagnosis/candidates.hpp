@@ -80,13 +80,24 @@ struct Excess {
   }
 };
 
-/// Starting points of each candidate's full fit (effect coordinates, then G's time scale), in
-/// res.candidates' order.
+/// Starting points of each candidate's full fit (effect coordinates, then the nominal refit: G's time
+/// scale, f's shape, f's next term), in res.candidates' order.
 using Starts = std::vector<std::vector<Eigen::VectorXd>>;
 
-/// A start of a candidate's full fit at a known effect (not a grid point) and G's time scale.
-Eigen::VectorXd start_at(const Effect& e, double time_scale, const DataScale& scale, const DiagnosisOptions& o,
+/// A start of a candidate's full fit at a known effect (not a grid point) and nominal refit `k`.
+Eigen::VectorXd start_at(const Effect& e, Nominal k, const DataScale& scale, const DiagnosisOptions& o,
                          const std::vector<Series>& data);
+
+/// The nominal refit a fit starts from, where it would go on from `fitted` (a fit's own, or the nuisance-only
+/// refit's): G's time scale, and f's shape and next term only in a widened pass (the nominal's static curve
+/// far off, res.nominal_refit.widened_from), else f as the model file has it. From the file's f, a widened
+/// pass's every fit first walked the whole way to the refit's f (case140 of the evaluation set: fit-segment
+/// cost 5000-7000 at the first stage's end against the nuisance-only refit's 805, every candidate's evidence
+/// 0), while an ordinary pass's f is within a few percent of the file's, and starting it at the nuisance-only
+/// refit there would hand the fit the curve that has already absorbed part of the effect.
+inline Nominal start_nominal(const DiagnosisResult& res, Nominal fitted) {
+  return res.nominal_refit.widened_from.empty() ? Nominal{fitted.time_scale} : fitted;
+}
 
 /// The parameter that chooses between forms fitted in spaces of their own, if any.
 std::optional<size_t> form_choice(EffectKind kind);
@@ -119,9 +130,16 @@ bool fit_segment_prefers(const CandidateResult& a, const CandidateResult& b, con
 /// Fitted candidates by penalised score on the judging segment, then the rest by evidence.
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o);
 
-/// Every candidate's evidence and starts (the grid's, or `warm`: the first pass's fits), then the full fit
-/// of the leading ones by evidence, ranked.
+/// Candidates fitted in an earlier pass (at another delay, or at the ordinary tolerances), where a later
+/// pass starts them (one start each instead of the grid's two), and that pass's stage name.
+struct WarmStarts {
+  const std::vector<CandidateResult>* candidates = nullptr;
+  std::string_view stage;
+};
+
+/// Every candidate's evidence and starts (the grid's, or `warm`'s fits), then the full fit of the leading
+/// ones by evidence, ranked.
 void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
-                    const DiagnosisOptions& o, double nuisance_cost, const std::vector<CandidateResult>* warm);
+                    const DiagnosisOptions& o, double nuisance_cost, WarmStarts warm);
 
 }  // namespace pvcgel::control::diagnosis::detail

@@ -396,10 +396,12 @@ PassStart start_pass(const HammersteinModel& model, const std::vector<Series>& d
   return {std::move(res), std::move(problem), scale, k, std::move(refit), none};
 }
 
-/// The diagnosis at widened_tolerances, begun: its first stages (start_pass), and why it was widened.
+/// The diagnosis at widened_tolerances, begun: its first stages (start_pass), why it was widened, and the
+/// ordinary diagnosis's candidate fits when it ran to the end first (the wide one's starts).
 struct WideStart {
   std::vector<std::string> from;
   std::optional<PassStart> start;
+  const std::vector<CandidateResult>* ordinary_fits = nullptr;
 };
 
 /// One diagnosis at the tolerances `options` gives, or from the start at widened_tolerances when
@@ -448,8 +450,9 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
     if (!none) {
       // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;
       // 5. the verdict.
-      fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(),
-                     second ? &second->candidates : nullptr);
+      const WarmStarts warm = second ? WarmStarts{&second->candidates, "candidate fits at the new delay"}
+                                     : WarmStarts{widened.ordinary_fits, "candidate fits from the ordinary run's"};
+      fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(), warm);
       if (const auto d = second ? std::nullopt : leading_delay(res, problem, data, scale, o)) {
         second = SecondPass{res.alignment, res.candidates, d->delay_samples, d->candidate};
         earlier_simulations += problem.simulations();
@@ -482,6 +485,7 @@ DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series
     second.progress = [tell = options.progress](std::string_view stage, std::size_t done, std::size_t total) {
       tell("with a wider curve: " + std::string(stage), done, total);
     };
+  wider_curve.ordinary_fits = &ordinary.candidates;
   DiagnosisResult wide = diagnosis_pass(model, data, second, std::move(wider_curve), nullptr);
   wide.simulations += ordinary.simulations;
   if (!widened_predicts_better(ordinary, wide, options)) {

@@ -254,7 +254,7 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
   for (const Effect& e : pair.effects)
     if (const auto* own = fitted_candidate(res, e.kind)) {
       alone.push_back(*own);
-      starts.push_back({start_at(e, pair.nominal.time_scale, scale, o, data)});
+      starts.push_back({start_at(e, start_nominal(res, pair.nominal), scale, o, data)});
     }
   std::vector<size_t> all(alone.size());
   std::iota(all.begin(), all.end(), 0);
@@ -348,7 +348,7 @@ bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair,
   wide.time_scale_tolerance = std::max(o.time_scale_tolerance, 1.0);
   std::vector<CandidateResult> leader{res.candidates.front()};
   if (leader[0].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(leader[0].loop_memory);
-  const Starts starts{{start_at(leader[0].effect, leader[0].time_scale, scale, wide, data)}};
+  const Starts starts{{start_at(leader[0].effect, Nominal{leader[0].time_scale}, scale, wide, data)}};
   fit_each("leader with a wider nominal refit", leader, {0}, starts, res.held_out, problem, data, scale, wide);
   const Excess excess(res);
   return excess(leader[0].errors) - excess(pair.errors) > o.ambiguity_margin * excess.base;

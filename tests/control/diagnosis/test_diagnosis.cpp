@@ -123,17 +123,20 @@ TEST(Diagnose, AnEffectBesideANominalFOfTooLowAnOrderIsFittedWiderWhenThatPredic
   // The same nominal, a rig with a loop: a wider f cannot make it none. The widened nuisance-only refit
   // takes most of the curve's error, so the diagnosis runs once more at the widened tolerances, and that run
   // is kept: its model predicts the held-out data better than the ordinary run's, where f's error stays
-  // beside the loop in every fit.
+  // beside the loop in every fit. The second run starts each candidate where the first fitted it: one fit
+  // per candidate space, not the coarse grid's two starts (four for the loop).
   const auto nominal = n2_fit_of_n3();
   const auto data = std::vector<Series>{recording({EffectKind::hysteresis, {0.1, 30.0}}, 0.05, 7)};
   DiagnosisOptions told;
-  std::vector<std::string> stages;  // the progress a user sees names the second run's stages apart
+  std::map<std::string, std::size_t> fits;  // the progress a user sees names the second run's stages apart
   told.progress = [&](std::string_view stage, std::size_t done, std::size_t total) {
-    if (done == total) stages.emplace_back(stage);
+    if (done == total) fits[std::string(stage)] = total;
   };
   const auto r = diagnose(nominal, data, told);
-  EXPECT_NE(std::find(stages.begin(), stages.end(), "candidate fits"), stages.end());
-  EXPECT_NE(std::find(stages.begin(), stages.end(), "with a wider curve: candidate fits"), stages.end());
+  ASSERT_TRUE(fits.count("candidate fits"));
+  ASSERT_TRUE(fits.count("with a wider curve: candidate fits from the ordinary run's"));
+  EXPECT_FALSE(fits.count("with a wider curve: coarse grids"));
+  EXPECT_LE(2 * fits["with a wider curve: candidate fits from the ordinary run's"], fits["candidate fits"]);
   EXPECT_EQ(r.verdict, "hysteresis") << r.explanation;
   const auto& from = r.nominal_refit.widened_from;
   EXPECT_NE(std::find(from.begin(), from.end(), "poly_shape"), from.end());
