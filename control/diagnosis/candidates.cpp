@@ -107,6 +107,25 @@ Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& fir
   return starts;
 }
 
+/// The coarse grid's starts and evidence (grid_starts), and each candidate's earlier fit as a start too
+/// (warm_starts), instead of the grid's for all but the earlier pass's `warm.regridded` leaders.
+Starts regridded_warm_starts(DiagnosisResult& res, Problem& problem, const WarmStarts& warm,
+                             const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o,
+                             double nuisance_cost) {
+  Starts starts = grid_starts(res, problem, data, scale, o, nuisance_cost);
+  const auto& earlier = *warm.candidates;
+  for (size_t i = 0; i < res.candidates.size(); ++i) {
+    const auto it = std::find_if(earlier.begin(), earlier.end(), [&](const CandidateResult& c) {
+      return c.fitted && c.effect.kind == res.candidates[i].effect.kind;
+    });
+    if (it == earlier.end()) continue;
+    const auto start = start_at(it->effect, start_nominal(res, nominal_of(*it)), scale, o, data);
+    if (static_cast<size_t>(it - earlier.begin()) < warm.regridded) starts[i].push_back(start);
+    else starts[i] = {start};
+  }
+  return starts;
+}
+
 /// The branch each recording's loop starts on, one recording at a time, by the fit-segment cost at z:
 /// virgin, rising or falling, then partway along the better side (set_loop_memory: a single step from a
 /// hold at another level, the start of a recording made after such a hold), to an eighth of the widest play.
@@ -349,8 +368,9 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
 /// ones by evidence, ranked by held-out score.
 void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                     const DiagnosisOptions& o, double nuisance_cost, WarmStarts warm) {
-  const Starts starts = warm.candidates ? warm_starts(res, *warm.candidates, data, scale, o)
-                                        : grid_starts(res, problem, data, scale, o, nuisance_cost);
+  const Starts starts = !warm.candidates       ? grid_starts(res, problem, data, scale, o, nuisance_cost)
+                        : warm.regridded == 0 ? warm_starts(res, *warm.candidates, data, scale, o)
+                                              : regridded_warm_starts(res, problem, warm, data, scale, o, nuisance_cost);
   std::vector<size_t> order(res.candidates.size());
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(),

@@ -451,7 +451,8 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
       // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;
       // 5. the verdict.
       const WarmStarts warm = second ? WarmStarts{&second->candidates, "candidate fits at the new delay"}
-                                     : WarmStarts{widened.ordinary_fits, "candidate fits from the ordinary run's"};
+                                     : WarmStarts{widened.ordinary_fits, "candidate fits from the ordinary run's",
+                                                  kRegriddedLeaders};
       fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(), warm);
       if (const auto d = second ? std::nullopt : leading_delay(res, problem, data, scale, o)) {
         second = SecondPass{res.alignment, res.candidates, d->delay_samples, d->candidate};
