@@ -92,6 +92,14 @@ Starts grid_starts(DiagnosisResult& res, Problem& problem, const std::vector<Ser
   return starts;
 }
 
+/// Where a later pass starts candidate `c`: at its earlier fit, or at its grid point with G's time scale 1
+/// when it was not fitted (f as start_nominal has it either way).
+Eigen::VectorXd warm_start(const DiagnosisResult& res, const CandidateResult& c, const DataScale& scale,
+                           const DiagnosisOptions& o, const std::vector<Series>& data) {
+  const Nominal refit{1.0, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope};
+  return start_at(c.effect, start_nominal(res, c.fitted ? nominal_of(c) : refit), scale, o, data);
+}
+
 /// A later pass starts each candidate where the earlier one fitted it (its evidence is the earlier pass's):
 /// one start each instead of the grid's two, a refit after a change of one sample of delay or of f's
 /// tolerances.
@@ -99,8 +107,7 @@ Starts warm_starts(DiagnosisResult& res, const std::vector<CandidateResult>& fir
                    const DataScale& scale, const DiagnosisOptions& o) {
   Starts starts;
   for (const auto& c : first) {
-    const Nominal refit{1.0, res.nominal_refit.poly_shape, res.nominal_refit.poly_next_slope};
-    starts.push_back({start_at(c.effect, start_nominal(res, c.fitted ? nominal_of(c) : refit), scale, o, data)});
+    starts.push_back({warm_start(res, c, scale, o, data)});
     res.candidates.push_back(c);
     res.candidates.back().fitted = false;
   }
@@ -119,7 +126,7 @@ Starts regridded_warm_starts(DiagnosisResult& res, Problem& problem, const WarmS
       return c.fitted && c.effect.kind == res.candidates[i].effect.kind;
     });
     if (it == earlier.end()) continue;
-    const auto start = start_at(it->effect, start_nominal(res, nominal_of(*it)), scale, o, data);
+    const auto start = warm_start(res, *it, scale, o, data);
     if (static_cast<size_t>(it - earlier.begin()) < warm.regridded) starts[i].push_back(start);
     else starts[i] = {start};
   }
