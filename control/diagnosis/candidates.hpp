@@ -101,9 +101,7 @@ Eigen::VectorXd start_at(const Effect& e, Nominal k, const DataScale& scale, con
 /// starting it at the nuisance-only refit there would hand the fit the curve that has already absorbed part
 /// of the effect.
 inline Nominal start_nominal(const DiagnosisResult& res, Nominal fitted) {
-  const auto& bounds = res.nominal_refit.at_bounds;
-  const bool from_fitted =
-      !res.nominal_refit.widened_from.empty() && std::find(bounds.begin(), bounds.end(), "gain") == bounds.end();
+  const bool from_fitted = res.nominal_refit.widened() && !res.nominal_refit.at_bound("gain");
   return from_fitted ? fitted : Nominal{fitted.time_scale};
 }
 

@@ -338,7 +338,7 @@ std::vector<std::string> shape_off(const NominalRefit& r) {
 /// what bends the curve, and on the tuning set, widening the whole diagnosis on it turned an
 /// asymmetric-dynamics case into a mode.
 std::vector<std::string> static_curve_off(const NominalRefit& r) {
-  if (std::find(r.at_bounds.begin(), r.at_bounds.end(), "gain") == r.at_bounds.end()) return {};
+  if (!r.at_bound("gain")) return {};
   auto off = shape_off(r);
   off.insert(off.begin(), "gain");  // refit_at_bounds names the gain first
   return off;

@@ -4,6 +4,7 @@
 /// voltage (output error), locate where and in which regime the residual
 /// exceeds the noise, fit candidate effects and choose by held-out error.
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <functional>
@@ -146,6 +147,10 @@ struct NominalRefit {
   /// The parameters above that stop at their tolerance (refit_at_bounds), by JSON key: those fitted with
   /// the named effects when there are any, else the nuisance-only refit's.
   std::vector<std::string> at_bounds;
+  /// Whether the parameter `name` (its JSON key) is among at_bounds.
+  [[nodiscard]] bool at_bound(std::string_view name) const {
+    return std::find(at_bounds.begin(), at_bounds.end(), name) != at_bounds.end();
+  }
   /// The parameters of the nuisance-only refit that stopped at the ordinary tolerances when the diagnosis
   /// widened them (DiagnosisOptions::widen_off_nominal); empty when it did not (or when the shape alone
   /// stopped and the widened refit did not make the data `none`).
