@@ -238,7 +238,12 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       // diagnose fits each placement in a space of its own.
       return {{"knee_um", 0.0, 2.0 * y_abs, false, rel(y_abs, {0.0, 0.4, 0.8})},
               {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(y_abs, {1.5, 5.0, 20.0})},
-              {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
+              {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true},
+              // A stroke with both signs may meet one stop and not the other (a one-sided limit): the
+              // knees then lie off-centre. Held at 0 for a one-signed stroke, where only the nearer
+              // stop acts and its height is the knee alone.
+              d.bipolar_stroke() ? ParameterSpec{"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0}
+                                 : ParameterSpec{"centre_um", 0.0, 0.0, false, {0.0}, 0.0, true}};
     case EffectKind::delay: {
       const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
       return {{"extra_delay_s", 0.0, d.delay_samples_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
@@ -451,7 +456,7 @@ double AugmentedPlant::time_scale(double w) const noexcept {
 }
 
 double AugmentedPlant::output_stage(double y, long sample) const noexcept {
-  if (has(EffectKind::saturation) && !saturate_drive_) y = soft_saturation(y, p(EffectKind::saturation)[0], p(EffectKind::saturation)[1]);
+  if (has(EffectKind::saturation) && !saturate_drive_) y = soft_saturation(y, p(EffectKind::saturation));
   if (has(EffectKind::drift)) y += drift_um(p(EffectKind::drift), static_cast<double>(sample) * Ts_);
   return y;
 }

@@ -89,6 +89,11 @@ struct DataScale {
   double fit_end_s = std::numeric_limits<double>::infinity();
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
   double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
+  /// How far the displacement reaches below zero (recorded or simulated): a stroke with both signs has a
+  /// stop on each side, which need not lie at the same height.
+  double y_below_zero_um = 0.0;
+  /// The stroke has both signs, each a tenth of the largest |displacement| or more.
+  [[nodiscard]] bool bipolar_stroke() const noexcept { return y_below_zero_um >= 0.1 * y_abs_um && y_abs_um > 0.0; }
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
   [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
@@ -96,7 +101,7 @@ struct DataScale {
   /// scale by) are checked against the union of their bounds, physical limits only.
   static DataScale unbounded(double sample_time_s) noexcept {
     return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12,
-            .delay_samples_max = kMaxDelaySamples};
+            .y_below_zero_um = 1e12, .delay_samples_max = kMaxDelaySamples};
   }
   static DataScale tiny(double sample_time_s) noexcept {
     return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12};
@@ -148,21 +153,23 @@ inline double dead_zone(double u_V, double d_V, double w_V) noexcept {
   return std::copysign(a <= d_V ? 0.0 : (a <= d_V + w_V ? (a - d_V) * (d_V + w_V) / w_V : a), u_V);
 }
 
-/// The saturation effect's soft knee: |y| above `knee` softens as knee + e / sqrt(1 + (e / softness)^2)
-/// (odd: bipolar strokes), approaching knee + softness.
-inline double soft_saturation(double y, double knee, double softness) noexcept {
-  const double excess = std::abs(y) - knee;
-  return excess > 0.0 ? std::copysign(knee + excess / std::sqrt(1.0 + (excess / softness) * (excess / softness)), y) : y;
+/// The saturation effect's soft knee, its parameters q = (knee, softness, on_drive, centre): y farther than
+/// `knee` from `centre` softens as knee + e / sqrt(1 + (e / softness)^2) (odd about the centre: both stops of a
+/// bipolar stroke; a centre off zero puts them at different heights), approaching knee + softness.
+inline double soft_saturation(double y, const std::array<double, kMaxEffectParams>& q) noexcept {
+  const double from_centre = y - q[3], excess = std::abs(from_centre) - q[0];
+  return excess > 0.0 ? q[3] + std::copysign(q[0] + excess / std::sqrt(1.0 + (excess / q[1]) * (excess / q[1])), from_centre)
+                      : y;
 }
 
 /// The saturation effect on the drive (on_drive): G's input for f's output w, the soft knee acting on the
 /// static displacement G(0) w it would give (`q` the saturation's parameters).
 inline double saturated_drive(double w, double dc_gain, const std::array<double, kMaxEffectParams>& q) noexcept {
-  return soft_saturation(dc_gain * w, q[0], q[1]) / dc_gain;
+  return soft_saturation(dc_gain * w, q) / dc_gain;
 }
 /// d soft_saturation / dy: 1 below the knee, (1 + (excess / softness)^2)^(-3/2) beyond it.
-inline double soft_saturation_slope(double y, double knee, double softness) noexcept {
-  const double excess = std::abs(y) - knee, r2 = (excess / softness) * (excess / softness);
+inline double soft_saturation_slope(double y, const std::array<double, kMaxEffectParams>& q) noexcept {
+  const double excess = std::abs(y - q[3]) - q[0], r2 = (excess / q[1]) * (excess / q[1]);
   return excess > 0.0 ? 1.0 / ((1.0 + r2) * std::sqrt(1.0 + r2)) : 1.0;
 }
 
@@ -234,8 +241,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    branch, or (spread_decades > 0) three with fraction / 3 each at tau 10^(-spread/2, 0, +spread/2),
 ///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
 ///  - dead_zone: no response below threshold d, linear catch-up to u at 2 d;
-///  - saturation: |y| above a knee softens as knee + e / sqrt(1 + (e / Y)^2) (both signs: bipolar strokes,
-///    soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
+///  - saturation: y farther than a knee from a centre (0 by default) softens as knee + e / sqrt(1 + (e / Y)^2)
+///    (both signs: bipolar strokes, with stops at different heights when the centre is off zero; soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
 ///    the static displacement G(0) f it would give (an amplifier or an actuator force that saturates: the
 ///    displacement then approaches the limit with G's dynamics);
 ///  - delay: extra transport delay, fractional too: the held command switches d samples into a sample

@@ -111,14 +111,14 @@ void EffectCompensator::refuse_unsafe(double voltage_max_V, double operating_poi
   }
   if (has(EffectKind::saturation)) {
     const auto& q = p(EffectKind::saturation);
-    const double excess = operating_point_um - q[0];
+    const double excess = std::abs(operating_point_um - q[3]) - q[0];
     const double gain = excess > 0.0 ? std::pow(1.0 + (excess / q[1]) * (excess / q[1]), 1.5) : 1.0;
     if (gain > kMaxSaturationInverseGain)
       throw ConfigError(key(EffectKind::saturation),
-                        format("controller.operating_point_um = %.4g um lies deep beyond the knee (%.4g um): the "
-                               "inverse's slope there is %.3g (at most 4 is safe: it multiplies sensor noise); "
-                               "refit, or lower the operating point",
-                               operating_point_um, q[0], gain));
+                        format("controller.operating_point_um = %.4g um lies deep beyond the knee (%.4g um from "
+                               "centre_um = %.4g um): the inverse's slope there is %.3g (at most 4 is safe: it "
+                               "multiplies sensor noise); refit, or move the operating point toward the centre",
+                               operating_point_um, q[0], q[3], gain));
   }
 }
 
@@ -206,11 +206,11 @@ double EffectCompensator::creep_ahead(int ahead) const noexcept {
 
 double EffectCompensator::saturation_inverse(double y) const noexcept {
   if (!has(EffectKind::saturation)) return y;
-  const double knee = p(EffectKind::saturation)[0], Y = p(EffectKind::saturation)[1];
-  const double out = std::min(std::abs(y) - knee, kSaturationCeilingShare * Y);
+  const double knee = p(EffectKind::saturation)[0], Y = p(EffectKind::saturation)[1], centre = p(EffectKind::saturation)[3];
+  const double out = std::min(std::abs(y - centre) - knee, kSaturationCeilingShare * Y);
   if (out <= 0.0) return y;
   // out = e / sqrt(1 + (e / Y)^2) solved for e.
-  return std::copysign(knee + out / std::sqrt(1.0 - (out / Y) * (out / Y)), y);
+  return centre + std::copysign(knee + out / std::sqrt(1.0 - (out / Y) * (out / Y)), y - centre);
 }
 
 double EffectCompensator::drive(double w) const noexcept {
@@ -220,7 +220,7 @@ double EffectCompensator::drive(double w) const noexcept {
 double EffectCompensator::drive_slope(double w) const noexcept {
   if (drive_dc_gain_ == 0.0) return 1.0;
   const auto& q = p(EffectKind::saturation);
-  return soft_saturation_slope(drive_dc_gain_ * w, q[0], q[1]);
+  return soft_saturation_slope(drive_dc_gain_ * w, q);
 }
 
 double EffectCompensator::drive_inverse(double w) const noexcept {

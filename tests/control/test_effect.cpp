@@ -180,7 +180,7 @@ TEST(AugmentedPlant, SaturationOnTheDriveIsGFedTheSaturatedDrive) {
   const auto model = paper_model(3);
   const double dc = model.G.dc_gain();
   // The voltage whose f gives the saturated drive of 600 V: the nominal plant stepped there is the same plant.
-  const double w = soft_saturation(dc * model.f(600.0), 100.0, 200.0) / dc;
+  const double w = soft_saturation(dc * model.f(600.0), {100.0, 200.0, 0.0, 0.0}) / dc;
   double lo = 0.0, hi = 600.0;
   for (int i = 0; i < 100; ++i) (model.f(0.5 * (lo + hi)) < w ? lo : hi) = 0.5 * (lo + hi);
   const auto saturated = run(on_drive, steps(30000, 0.0, 600.0), 0.0);

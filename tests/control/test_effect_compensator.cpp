@@ -132,12 +132,23 @@ TEST(EffectCompensator, ASaturationOnTheDriveIsInvertedOnTheDriveAndLeavesTheOut
   const std::vector<Effect> effects{{EffectKind::saturation, {60.0, 50.0, 1.0}}};
   EffectCompensator c(kUnitModel, effects, 1e-3, 0.0, 1000.0, 0, 50.0);
   for (double w = -105.0; w <= 105.0; w += 0.5) {
-    EXPECT_NEAR(c.drive(w), soft_saturation(w, 60.0, 50.0), 1e-12) << w;
+    EXPECT_NEAR(c.drive(w), soft_saturation(w, effects[0].p), 1e-12) << w;
     EXPECT_NEAR(c.drive(c.drive_inverse(w)), w, 1e-9) << w;  // within 95% of the ceiling (110)
     EXPECT_EQ(c.linear_output(w), w);
   }
   // Beyond the ceiling the request is read as 95% of the way there, as on the output side.
   EXPECT_NEAR(c.drive(c.drive_inverse(500.0)), 60.0 + 0.95 * 50.0, 1e-9);
+}
+
+TEST(EffectCompensator, AnOffCentreSaturationIsUndoneAboutItsCentre) {
+  // Centre -30 um: the knees lie at -70 and +10 um, so the sine (10 .. 90 um) runs past the upper one alone.
+  const std::vector<Effect> effects{{EffectKind::saturation, {40.0, 50.0, 0.0, -30.0}}};
+  EffectCompensator c(kUnitModel, effects, 1e-3, 0.0, 1000.0, 0, 50.0);
+  EXPECT_LT(worst_output_side_error(c, effects), 1e-9);
+  EXPECT_EQ(soft_saturation(-60.0, effects[0].p), -60.0);      // inside the lower knee
+  EXPECT_GT(soft_saturation(-80.0, effects[0].p), -80.0 + 0.1);  // 10 um past it: pulled toward the centre
+  EXPECT_LT(soft_saturation(60.0, effects[0].p), 60.0 - 10.0);  // 50 um past the upper knee
+  EXPECT_NEAR(c.linear_output(soft_saturation(60.0, effects[0].p)), 60.0, 1e-9);
 }
 
 TEST(EffectCompensator, OutputSideUndoesASettlingDrift) {
@@ -195,6 +206,8 @@ TEST(EffectCompensator, RefusesWhatCannotBeCompensatedSafelyWithTheReason) {
   expect_refused({{EffectKind::dead_zone, {500.0, 400.0}}}, "model.effect[0]", "voltage_max_V", 850.0);
   // The loop works around operating_point_um = 100 um: a knee at 20 um with 10 um softness is far below.
   expect_refused({{EffectKind::saturation, {20.0, 10.0}}}, "model.effect[0]", "beyond the knee");
+  // Measured from an off-centre saturation's centre: 100 um is 90 um past a 40 um knee about -30 um.
+  expect_refused({{EffectKind::saturation, {40.0, 15.0, 0.0, -30.0}}}, "model.effect[0]", "centre_um = -30");
   expect_refused({{EffectKind::delay, {0.02}}}, "model.effect[0]", "reference preview");
   expect_refused({{EffectKind::delay, {0.0125}}}, "model.effect[0]", "at most 8");
   // A full second-order mode in series: Q G^-1 is improper, G_d^-1 unstable; the design check names the effect.
