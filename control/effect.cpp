@@ -233,17 +233,24 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
     case EffectKind::dead_zone:
       return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
               {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1})}};
-    case EffectKind::saturation:
+    case EffectKind::saturation: {
+      const double near = d.bipolar_stroke() ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
+      std::vector<double> stroke_knees{0.0};
+      for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
       // on_drive is 0 or 1, not fitted as a number (fixed: a space holds it at its lower bound, 0);
       // diagnose fits each placement in a space of its own.
-      return {{"knee_um", 0.0, 2.0 * y_abs, false, rel(y_abs, {0.0, 0.4, 0.8})},
-              {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(y_abs, {1.5, 5.0, 20.0})},
-              {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true},
-              // A stroke with both signs may meet one stop and not the other (a one-sided limit): the
-              // knees then lie off-centre. Held at 0 for a one-signed stroke, where only the nearer
-              // stop acts and its height is the knee alone.
-              d.bipolar_stroke() ? ParameterSpec{"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0}
-                                 : ParameterSpec{"centre_um", 0.0, 0.0, false, {0.0}, 0.0, true}};
+      // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
+      // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
+      // identified on the same data leaves.
+      std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * y_abs, false, stroke_knees},
+                                       {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(stroke, {0.3, 1.5, 5.0, 20.0})},
+                                       {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
+      // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
+      // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
+      // no centre to fit there (0, the default; a held one would still count in the penalised score).
+      if (d.bipolar_stroke()) specs.push_back({"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0});
+      return specs;
+    }
     case EffectKind::delay: {
       const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
       return {{"extra_delay_s", 0.0, d.delay_samples_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};

@@ -89,11 +89,17 @@ struct DataScale {
   double fit_end_s = std::numeric_limits<double>::infinity();
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
   double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
-  /// How far the displacement reaches below zero (recorded or simulated): a stroke with both signs has a
-  /// stop on each side, which need not lie at the same height.
-  double y_below_zero_um = 0.0;
-  /// The stroke has both signs, each a tenth of the largest |displacement| or more.
-  [[nodiscard]] bool bipolar_stroke() const noexcept { return y_below_zero_um >= 0.1 * y_abs_um && y_abs_um > 0.0; }
+  double y_min_um = 0.0, y_max_um = 200.0;  ///< the stroke, recorded or simulated
+  /// The stroke has both signs, each a tenth of the largest |displacement| or more: it has a stop on each
+  /// side, which need not lie at the same height.
+  [[nodiscard]] bool bipolar_stroke() const noexcept {
+    return y_abs_um > 0.0 && std::min(-y_min_um, y_max_um) >= 0.1 * y_abs_um;
+  }
+  /// The |displacement| nearest zero of a one-signed stroke (0 when it crosses zero): a sensor zeroed
+  /// elsewhere records a stroke from 74 to 125 um, whose stop lies within that range, not within 0..125.
+  [[nodiscard]] double y_abs_nearest_um() const noexcept {
+    return y_min_um >= 0.0 ? y_min_um : (y_max_um <= 0.0 ? -y_max_um : 0.0);
+  }
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
   [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
@@ -101,10 +107,11 @@ struct DataScale {
   /// scale by) are checked against the union of their bounds, physical limits only.
   static DataScale unbounded(double sample_time_s) noexcept {
     return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12,
-            .y_below_zero_um = 1e12, .delay_samples_max = kMaxDelaySamples};
+            .y_min_um = -1e12, .y_max_um = 1e12, .delay_samples_max = kMaxDelaySamples};
   }
   static DataScale tiny(double sample_time_s) noexcept {
-    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12};
+    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12,
+            .y_min_um = -1e-12, .y_max_um = 1e-12};
   }
 };
 

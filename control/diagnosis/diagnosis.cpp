@@ -328,7 +328,7 @@ namespace {
 std::vector<std::string> shape_off(const NominalRefit& r) {
   std::vector<std::string> off;
   for (const auto& b : r.at_bounds)
-    if (b == "poly_shape" || b == "poly_next_slope") off.push_back(b);
+    if (is_f_term(b)) off.push_back(b);
   return off;
 }
 

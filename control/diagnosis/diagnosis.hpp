@@ -158,6 +158,10 @@ struct NominalRefit {
   [[nodiscard]] bool widened() const noexcept { return !widened_from.empty(); }
 };
 
+/// Whether a refit parameter (its JSON key, as in NominalRefit::at_bounds) is one of f's terms: its shape
+/// or its added term, which a static curve's effect (a dead zone, a saturation) bends as well.
+inline bool is_f_term(std::string_view name) noexcept { return name == "poly_shape" || name == "poly_next_slope"; }
+
 /// The statistical `none` test on the residual of the nuisance-only refit.
 struct NoneTest {
   double false_alarm_rate = 0.01;

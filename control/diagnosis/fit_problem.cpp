@@ -502,14 +502,17 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
   d.duration_s = 0.0;
   d.u_min_V = INFINITY;
   d.u_max_V = -INFINITY;
-  d.y_abs_um = d.y_below_zero_um = 0.0;
+  d.y_min_um = INFINITY;
+  d.y_max_um = -INFINITY;
   for (size_t r = 0; r < data.size(); ++r) {
     const auto& s = data[r];
     d.duration_s = std::max(d.duration_s, s.t_s.back() - s.t_s.front());
     for (double u : s.u_V) d.u_min_V = std::min(d.u_min_V, u), d.u_max_V = std::max(d.u_max_V, u);
-    for (double y : y_nominal[r]) d.y_abs_um = std::max(d.y_abs_um, std::abs(y)), d.y_below_zero_um = std::max(d.y_below_zero_um, -y);
-    for (double y : s.y_um) d.y_abs_um = std::max(d.y_abs_um, std::abs(y)), d.y_below_zero_um = std::max(d.y_below_zero_um, -y);
+    for (const auto* ys : {&y_nominal[r], &s.y_um})
+      for (double y : *ys) d.y_min_um = std::min(d.y_min_um, y), d.y_max_um = std::max(d.y_max_um, y);
   }
+  if (!(d.y_min_um <= d.y_max_um)) d.y_min_um = d.y_max_um = 0.0;  // no samples
+  d.y_abs_um = std::max(std::abs(d.y_min_um), std::abs(d.y_max_um));
   return d;
 }
 double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {

@@ -20,7 +20,7 @@ constexpr double kTimeScaleMoved = 0.1;
 bool can_stand_in_for(EffectKind k, const std::string& parameter) {
   using enum EffectKind;
   const bool static_curve = k == dead_zone || k == saturation;
-  if (parameter == "poly_shape" || parameter == "poly_next_slope") return static_curve;
+  if (is_f_term(parameter)) return static_curve;
   if (parameter == "gain") return static_curve || k == creep;
   return k == asymmetric_dynamics || k == bias_dependent_dynamics || k == creep || k == resonance || k == delay;
 }
@@ -144,12 +144,48 @@ void add_unscaled_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res,
   plans.push_back({own && can_run_together(a.effect, own->effect) ? own->effect : start.effect, {start}});
 }
 
+/// Whether f's shape or its next term stopped at their tolerance (or were widened) in the nuisance-only
+/// refit or beside the leader: the static curve is off by more than a nominal's error, as a dead zone or a
+/// saturation bends it. Beside the leader is where it shows when the leader takes the rest (evaluation
+/// case002: f's shape free in the nuisance-only refit, at its bound beside a wandering drift).
+bool f_stopped_at_tolerance(const DiagnosisResult& res, const DiagnosisOptions& o) {
+  const auto& a = res.candidates.front();
+  const auto beside = refit_at_bounds_with(a.gain, nominal_of(a), {&a.effect, 1}, o);
+  for (const auto* names : {&res.nominal_refit.at_bounds, &res.nominal_refit.widened_from, &beside})
+    if (std::any_of(names->begin(), names->end(), [](const std::string& n) { return is_f_term(n); })) return true;
+  return false;
+}
+
+/// When f stopped at its tolerance (f_stopped_at_tolerance), each static-curve kind (dead zone, saturation) is fitted
+/// beside the leader, from its own fit and from its grid point in the leader's residual: alone beside a
+/// larger effect its fit is poor (evaluation case002, a saturation under a wandering drift: held out 0.18 um
+/// alone, worse than the nominal refit), so it is rarely among the runners-up, while the refit's f at its
+/// tolerance says a curve is there.
+void add_static_curve_plans(std::vector<PairPlan>& plans, const DiagnosisResult& res, Problem& problem,
+                            const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
+  if (!f_stopped_at_tolerance(res, o)) return;
+  const auto& a = res.candidates.front();
+  if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
+  for (EffectKind kind : {EffectKind::dead_zone, EffectKind::saturation}) {
+    if (kind == a.effect.kind) continue;
+    if (std::any_of(plans.begin(), plans.end(), [&](const PairPlan& p) { return p.second.kind == kind; })) continue;
+    const EffectKind one[] = {kind};
+    const auto ranked = grid_beside(a, one, nominal_of(a), problem, data, scale, o);
+    if (ranked.empty()) continue;
+    const auto* own = fitted_candidate(res, kind);
+    plans.push_back({own && can_run_together(a.effect, own->effect) ? own->effect : ranked.front().second.effect,
+                     {ranked.front().second}});
+  }
+}
+
 /// The pairs worth fitting: with o.forward_pairs, the forward selection's best second effects; then the
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
 /// leader's residual is weak) when not already among them, and those on G's slow pole alone beside creep or a
 /// mode on the way (slow_pole_beside_a_linear_part). A forward kind whose own fit cannot run beside the leader
-/// in the form it chose (two effects that both change G's time scale) starts from its grid point alone.
+/// in the form it chose (two effects that both change G's time scale) starts from its grid point alone. Then
+/// the mode at the leader's residual peaks, the kind that stands in for a moved time scale, and the static
+/// curves when f stopped at its tolerance.
 std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                  const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
@@ -178,6 +214,7 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
   }
   add_mode_plan(out, res, problem, data, scale, o);
   add_unscaled_plan(out, res, problem, data, scale, o);
+  add_static_curve_plans(out, res, problem, data, scale, o);
   return out;
 }
 

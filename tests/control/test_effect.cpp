@@ -617,6 +617,29 @@ TEST(Effect, ADriftOnsetStaysInTheFirstNineTenthsOfTheFitSegment) {
   EXPECT_DOUBLE_EQ(parameter_specs(EffectKind::drift, DataScale{}).at(2).upper, DataScale{}.duration_s);
 }
 
+TEST(Effect, ASaturationFitsACentreOnlyOnAStrokeOfBothSignsAndStartsItsKneesWithinTheStroke) {
+  DataScale unipolar;
+  unipolar.y_min_um = 74.0;  // a sensor zeroed away from the stroke
+  unipolar.y_max_um = unipolar.y_abs_um = 125.0;
+  const auto one_signed = parameter_specs(EffectKind::saturation, unipolar);
+  ASSERT_EQ(one_signed.size(), 3u);  // no centre: 0, the default, and not counted in the penalised score
+  for (double knee : one_signed[0].starts) EXPECT_TRUE(knee == 0.0 || (knee >= 74.0 && knee < 125.0)) << knee;
+  DataScale bipolar = unipolar;
+  bipolar.y_min_um = -9.0;
+  bipolar.y_max_um = 7.0;
+  bipolar.y_abs_um = 9.0;
+  const auto both_signs = parameter_specs(EffectKind::saturation, bipolar);
+  ASSERT_EQ(both_signs.size(), 4u);
+  EXPECT_EQ(both_signs[3].name, "centre_um");
+  EXPECT_DOUBLE_EQ(both_signs[3].lower, -9.0);
+  EXPECT_DOUBLE_EQ(both_signs[3].default_value, 0.0);  // older files: symmetric about zero
+  // A stroke that barely crosses zero is one-signed (its far stop alone can act).
+  bipolar.y_min_um = -0.5;
+  EXPECT_EQ(parameter_specs(EffectKind::saturation, bipolar).size(), 3u);
+  // A file's saturation (checked against every scale) may carry a centre.
+  EXPECT_EQ(parameter_specs(EffectKind::saturation, DataScale::unbounded(1e-3)).size(), 4u);
+}
+
 TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
   const auto two = parse_effects(
       "[[sim.truth.effect]]\nname = \"hysteresis\"\nalpha = 0.05\nthreshold_scale_V = 20.0\n"

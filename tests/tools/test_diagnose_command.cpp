@@ -360,8 +360,9 @@ TEST(DiagnoseRealRecordings, EmpsFrictionIsADeadZoneNearTheSourcesCoulombFrictio
   // motor voltage in, the carriage's velocity out by central differences of the encoder). The source documents
   // viscous and Coulomb friction, F_c = 20.39 N identified by its own script. Against the best linear model (a
   // first-order G that takes the friction for damping) the friction is a dead zone on the drive: below the
-  // breakaway force the carriage does not move. Measured: dead_zone, 0.694 V = 24.4 N, with a slew limit beside
-  // it; held-out 4.15 against 15.0 mm/s (0.28x; the dead zone alone 0.48x).
+  // breakaway force the carriage does not move. Measured: dead_zone, 0.690 V = 24.3 N, with a saturation beside
+  // it (a slew limit before the pairs tried the static curves); held-out 3.83 against 15.0 mm/s (0.26x; the dead
+  // zone alone 0.48x).
   const auto o = diagnose_real_recordings("emps_friction", {"emps_velocity.csv"});
   const auto& r = o.result;
   EXPECT_EQ(r.verdict, "dead_zone") << o.summary;

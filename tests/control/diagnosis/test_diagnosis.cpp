@@ -610,6 +610,28 @@ TEST(Diagnose, ASaturatingSlowProcessRigSampledAtOneHertzGetsEveryCandidate) {
   EXPECT_EQ(r.verdict, "saturation") << r.explanation;
 }
 
+TEST(Diagnose, AOneSidedStopUnderBipolarDriveIsASaturationAboutACentre) {
+  // A piezo-like stack (linear f, fast G) driven +-70 V meets a stop above +4 um and none below (-9 um lies beyond its stroke): a knee
+  // symmetric about zero could not bend the top alone (evaluation case086 came out `hysteresis`).
+  const HammersteinModel stack{OddPolynomial({0.12}), TransferFunction({127.0}, {1.0, 127.0})};
+  Series s;
+  s.sample_time_s = 1e-3;
+  for (int k = 0; k < 20000; ++k) {
+    const double t = k * s.sample_time_s;
+    s.t_s.push_back(t);
+    s.u_V.push_back(45.0 * std::sin(2 * M_PI * 0.3 * t) + 25.0 * std::sin(2 * M_PI * 1.7 * t + 0.5));
+  }
+  AugmentedPlant plant(stack, 0, s.sample_time_s, Effect{EffectKind::saturation, {6.5, 8.0, 0.0, -2.5}});
+  s.y_um = plant.simulate(s.u_V, s.u_V[0]);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> N(0.0, 0.02);
+  for (double& y : s.y_um) y += N(rng);
+  const auto r = diagnose(stack, {s});
+  ASSERT_EQ(r.verdict, "saturation") << r.explanation;
+  EXPECT_LT(r.effect.p[3], -1.0) << "centre_um";  // off zero, toward the stop that does not act
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.3 * r.noise_sigma_um) << r.explanation;
+}
+
 TEST(Diagnose, NonMonotonePolynomialOverTheRecordedRangeIsAConfigError) {
   // n = 3 turns over at ~862 V.
   auto s = recording({}, 0.05);
