@@ -237,11 +237,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       const double near = d.bipolar_stroke() ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
       std::vector<double> stroke_knees{0.0};
       for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
-      // on_drive is 0 or 1, not fitted as a number (fixed: a space holds it at its lower bound, 0);
-      // diagnose fits each placement in a space of its own.
       // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
       // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
-      // identified on the same data leaves.
+      // identified on the same data leaves. on_drive is 0 or 1, not fitted as a number (fixed: a space
+      // holds it at its lower bound, 0); diagnose fits each placement in a space of its own.
       std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * y_abs, false, stroke_knees},
                                        {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(stroke, {0.3, 1.5, 5.0, 20.0})},
                                        {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
