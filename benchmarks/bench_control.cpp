@@ -107,7 +107,7 @@ void BM_AugmentedPlantSimulate(benchmark::State& state) {
   const auto i = static_cast<size_t>(state.range(0));
   if (i > 0) {
     Effect e{kCandidateEffects[i - 1], {}};
-    const auto specs = parameter_specs(e.kind, DataScale{.u_min_V = 100.0, .u_max_V = 500.0, .y_abs_um = 120.0});
+    const auto specs = parameter_specs(e.kind, DataScale{.u_min_V = 100.0, .u_max_V = 500.0, .y_max_um = 120.0});
     for (size_t j = 0; j < specs.size(); ++j) e.p[j] = specs[j].starts[specs[j].starts.size() / 2];
     effects.push_back(e);
     label = std::string(to_string(e.kind));

@@ -209,7 +209,7 @@ TransferFunction linear_block(const TransferFunction& G, std::span<const Effect>
 }
 
 std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) {
-  const double Ts = d.sample_time_s, span = d.u_span_V(), u_abs = d.u_abs_V(), y_abs = std::max(d.y_abs_um, 1e-12);
+  const double Ts = d.sample_time_s, span = d.u_span_V(), u_abs = d.u_abs_V(), y_abs = d.y_abs_um();
   const auto rel = [](double unit, std::initializer_list<double> fractions) {
     std::vector<double> v;
     for (double f : fractions) v.push_back(f * unit);
@@ -234,7 +234,8 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
               {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1})}};
     case EffectKind::saturation: {
-      const double near = d.bipolar_stroke() ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
+      const bool bipolar = d.bipolar_stroke();
+      const double near = bipolar ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
       std::vector<double> stroke_knees{0.0};
       for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
       // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
@@ -247,7 +248,7 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
       // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
       // no centre to fit there (0, the default; a held one would still count in the penalised score).
-      if (d.bipolar_stroke()) specs.push_back({"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0});
+      if (bipolar) specs.push_back({"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0});
       return specs;
     }
     case EffectKind::delay: {

@@ -88,13 +88,12 @@ struct DataScale {
   /// that starts after it acts on held-out data alone, where nothing fitted it.
   double fit_end_s = std::numeric_limits<double>::infinity();
   double u_min_V = 0.0, u_max_V = 1000.0;  ///< recorded command range
-  double y_abs_um = 200.0;    ///< largest |displacement| of the nominal simulation
-  double y_min_um = 0.0, y_max_um = 200.0;  ///< the stroke, recorded or simulated
+  double y_min_um = 0.0, y_max_um = 200.0;  ///< the stroke, recorded or by the nominal simulation
+  /// The largest |displacement|.
+  [[nodiscard]] double y_abs_um() const noexcept { return std::max({std::abs(y_min_um), std::abs(y_max_um), 1e-12}); }
   /// The stroke has both signs, each a tenth of the largest |displacement| or more: it has a stop on each
   /// side, which need not lie at the same height.
-  [[nodiscard]] bool bipolar_stroke() const noexcept {
-    return y_abs_um > 0.0 && std::min(-y_min_um, y_max_um) >= 0.1 * y_abs_um;
-  }
+  [[nodiscard]] bool bipolar_stroke() const noexcept { return std::min(-y_min_um, y_max_um) >= 0.1 * y_abs_um(); }
   /// The |displacement| nearest zero of a one-signed stroke (0 when it crosses zero): a sensor zeroed
   /// elsewhere records a stroke from 74 to 125 um, whose stop lies within that range, not within 0..125.
   [[nodiscard]] double y_abs_nearest_um() const noexcept {
@@ -106,11 +105,10 @@ struct DataScale {
   /// The largest and smallest scales: a file's parameters (nothing recorded to
   /// scale by) are checked against the union of their bounds, physical limits only.
   static DataScale unbounded(double sample_time_s) noexcept {
-    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_abs_um = 1e12,
-            .y_min_um = -1e12, .y_max_um = 1e12, .delay_samples_max = kMaxDelaySamples};
+    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_min_um = -1e12, .y_max_um = 1e12, .delay_samples_max = kMaxDelaySamples};
   }
   static DataScale tiny(double sample_time_s) noexcept {
-    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12, .y_abs_um = 1e-12,
+    return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12,
             .y_min_um = -1e-12, .y_max_um = 1e-12};
   }
 };
@@ -249,7 +247,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    a log-type creep; a negative fraction with the refitted gain is creep that keeps the DC gain;
 ///  - dead_zone: no response below threshold d, linear catch-up to u at 2 d;
 ///  - saturation: y farther than a knee from a centre (0 by default) softens as knee + e / sqrt(1 + (e / Y)^2)
-///    (both signs: bipolar strokes, with stops at different heights when the centre is off zero; soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
+///    (both signs: bipolar strokes, with stops at different heights when the centre is off zero;
+///    soft_saturation); on_drive 0 on the displacement (a stroke stop), 1 on G's input, the drive, in units of
 ///    the static displacement G(0) f it would give (an amplifier or an actuator force that saturates: the
 ///    displacement then approaches the limit with G's dynamics);
 ///  - delay: extra transport delay, fractional too: the held command switches d samples into a sample

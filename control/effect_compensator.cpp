@@ -111,8 +111,7 @@ void EffectCompensator::refuse_unsafe(double voltage_max_V, double operating_poi
   }
   if (has(EffectKind::saturation)) {
     const auto& q = p(EffectKind::saturation);
-    const double excess = std::abs(operating_point_um - q[3]) - q[0];
-    const double gain = excess > 0.0 ? std::pow(1.0 + (excess / q[1]) * (excess / q[1]), 1.5) : 1.0;
+    const double gain = 1.0 / soft_saturation_slope(operating_point_um, q);  // the inverse's slope there
     if (gain > kMaxSaturationInverseGain)
       throw ConfigError(key(EffectKind::saturation),
                         format("controller.operating_point_um = %.4g um lies deep beyond the knee (%.4g um from "

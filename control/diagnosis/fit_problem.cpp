@@ -512,7 +512,6 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
       for (double y : *ys) d.y_min_um = std::min(d.y_min_um, y), d.y_max_um = std::max(d.y_max_um, y);
   }
   if (!(d.y_min_um <= d.y_max_um)) d.y_min_um = d.y_max_um = 0.0;  // no samples
-  d.y_abs_um = std::max(std::abs(d.y_min_um), std::abs(d.y_max_um));
   return d;
 }
 double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {

@@ -620,14 +620,13 @@ TEST(Effect, ADriftOnsetStaysInTheFirstNineTenthsOfTheFitSegment) {
 TEST(Effect, ASaturationFitsACentreOnlyOnAStrokeOfBothSignsAndStartsItsKneesWithinTheStroke) {
   DataScale unipolar;
   unipolar.y_min_um = 74.0;  // a sensor zeroed away from the stroke
-  unipolar.y_max_um = unipolar.y_abs_um = 125.0;
+  unipolar.y_max_um = 125.0;
   const auto one_signed = parameter_specs(EffectKind::saturation, unipolar);
   ASSERT_EQ(one_signed.size(), 3u);  // no centre: 0, the default, and not counted in the penalised score
   for (double knee : one_signed[0].starts) EXPECT_TRUE(knee == 0.0 || (knee >= 74.0 && knee < 125.0)) << knee;
   DataScale bipolar = unipolar;
   bipolar.y_min_um = -9.0;
   bipolar.y_max_um = 7.0;
-  bipolar.y_abs_um = 9.0;
   const auto both_signs = parameter_specs(EffectKind::saturation, bipolar);
   ASSERT_EQ(both_signs.size(), 4u);
   EXPECT_EQ(both_signs[3].name, "centre_um");
