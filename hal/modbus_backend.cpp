@@ -155,7 +155,6 @@ void ModbusBackend::set_cycle_timeout() noexcept {
 }
 
 void ModbusBackend::flush_if_pending() noexcept {
-  if (since_timeout_ < kLateReplyWindow) ++since_timeout_;
   // A reply that came after its deadline would otherwise answer this request.
   if (!flush_pending_) return;
   modbus_flush(ctx_.get());
@@ -235,10 +234,10 @@ HalStatus ModbusBackend::transaction_failed(int rc, int& consecutive_failures) n
     timeouts_.fetch_add(1, std::memory_order_relaxed);
     status = HalStatus::timeout;
     flush_pending_ = true;
-    since_timeout_ = 0;
-  } else if (e == EMBBADDATA && since_timeout_ < kLateReplyWindow) {
-    // Most likely the late answer to a request that timed out just before: one
-    // more missed sample, not a broken device.
+    reply_outstanding_ = true;
+  } else if (e == EMBBADDATA && reply_outstanding_) {
+    // The late answer to a request that timed out (this request's own answer is
+    // now the one outstanding): one more missed sample, not a broken device.
     late_replies_.fetch_add(1, std::memory_order_relaxed);
     timeouts_.fetch_add(1, std::memory_order_relaxed);
     status = HalStatus::timeout;
@@ -272,6 +271,7 @@ HalStatus ModbusBackend::read_displacement(double& y_um) noexcept {
   flush_if_pending();
   const int rc = read_block();
   if (rc != block_count_) return transaction_failed(rc, read_failures_);
+  reply_outstanding_ = false;
   read_failures_ = 0;  // reads only: a module that answers reads but fails writes must still reach the threshold
   y_um = config_.sensor.decode(block_, block_start_);
   check_monitors();
@@ -304,6 +304,7 @@ HalStatus ModbusBackend::write_voltage(double voltage_V) noexcept {
   const int rc = write_counts(counts);
   if (rc != 1) return transaction_failed(rc < 0 ? rc : 0, write_failures_);
   write_failures_ = 0;
+  reply_outstanding_ = false;
   last_output_V_ = config_.amplifier.counts_to_output(counts);
   if (amplifier_fault_) {
     device_faults_.fetch_add(1, std::memory_order_relaxed);
@@ -329,6 +330,7 @@ HalStatus ModbusBackend::set_high_voltage(bool enabled) noexcept {
     flush_if_pending();
     const int rc = write_zero();
     if (rc != 1) return transaction_failed(rc < 0 ? rc : 0, write_failures_);
+    reply_outstanding_ = false;
     last_output_V_ = 0.0;
   }
   return HalStatus::ok;
@@ -375,7 +377,7 @@ void ModbusBackend::supervise() {
     const bool zero_written = modbus_connect(ctx_.get()) == 0 && write_zero() == 1;
     set_cycle_timeout();
     if (zero_written) {
-      flush_pending_ = false;
+      flush_pending_ = reply_outstanding_ = false;  // a new connection: nothing of the old one can arrive
       read_failures_ = write_failures_ = 0;
       wait = min_wait;
       reconnects_.fetch_add(1, std::memory_order_relaxed);

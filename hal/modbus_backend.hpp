@@ -109,7 +109,6 @@ class ModbusBackend final : public Hal {
   };
 
   static constexpr std::uint32_t kFirstContactTimeout_s = 1;  ///< first write after (re)connecting
-  static constexpr int kLateReplyWindow = 4;  ///< transactions after a timeout in which a mismatched reply counts as late
 
   /// Counts a failed transaction in `consecutive_failures` (reads and writes
   /// separately) and hands the link to the supervisor at the threshold.
@@ -140,7 +139,10 @@ class ModbusBackend final : public Hal {
   double last_output_V_ = 0.0;
   int read_failures_ = 0, write_failures_ = 0;  // failed transactions in a row, per direction
   bool flush_pending_ = false;  // a timed-out or garbled reply may still be on its way
-  int since_timeout_ = kLateReplyWindow;  // RT transactions since the last timeout
+  // A request went unanswered since the last matched reply. Replies come in order, so a
+  // frame that answers another request is that late answer while this holds, and garbage
+  // once a matched reply has shown that nothing older is still on its way.
+  bool reply_outstanding_ = false;
   int monitor_mismatches_ = 0;
   bool amplifier_fault_ = false;
 

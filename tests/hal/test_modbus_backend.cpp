@@ -229,9 +229,7 @@ TEST(ModbusBackend, UnreachableServerIsAClearStartupError) {
 
 TEST(ModbusBackend, MalformedRepliesAndExceptionsAreCountedAndTheLinkRecovers) {
   test::RawModbusServer raw;
-  auto cfg = test::plant_modbus_config(raw.port());
-  cfg.monitor_voltage.reset();
-  cfg.monitor_current.reset();
+  auto cfg = test::raw_server_modbus_config(raw.port());
   cfg.reconnect_after_failures = 6;
   cfg.reconnect_min_s = cfg.reconnect_max_s = 0.5;
   hal::ModbusBackend backend(cfg);
@@ -413,9 +411,7 @@ TEST(ModbusBackend, MonitorDisagreeingWithTheCommandIsAnAmplifierFault) {
 
 TEST(ModbusBackend, ALateReplyIsAMissedSampleNotGarbage) {
   test::RawModbusServer raw;
-  auto cfg = test::plant_modbus_config(raw.port());  // 6 ms per transaction
-  cfg.monitor_voltage.reset();
-  cfg.monitor_current.reset();
+  auto cfg = test::raw_server_modbus_config(raw.port());  // 6 ms per transaction
   hal::ModbusBackend backend(cfg);
   double y = 0;
   raw.set_mode(test::RawModbusServer::Mode::late_once);
@@ -431,5 +427,31 @@ TEST(ModbusBackend, ALateReplyIsAMissedSampleNotGarbage) {
   EXPECT_EQ(c.late_replies, 1u);
   EXPECT_EQ(c.timeouts, 2u);
   EXPECT_EQ(c.garbage_frames, 0u);
+  EXPECT_TRUE(backend.link_up());
+}
+
+TEST(ModbusBackend, AServerThatStaysBehindGivesMissedSamplesNotGarbageUntilAMatchedReply) {
+  // A stalled server that answers every request one transaction late: each frame
+  // received answers the request before. However long that lasts, these are missed
+  // samples (the loop's timeout count faults on them), never a garbled link; the
+  // first matched reply shows nothing older is on its way, and a mismatch after it is garbage.
+  test::RawModbusServer raw;
+  auto cfg = test::raw_server_modbus_config(raw.port());
+  cfg.reconnect_after_failures = 100;
+  hal::ModbusBackend backend(cfg);
+  double y = 0;
+  raw.set_mode(test::RawModbusServer::Mode::one_behind);
+  for (int i = 0; i < 8; ++i) {
+    EXPECT_EQ(backend.read_displacement(y), HalStatus::timeout) << "cycle " << i;
+    EXPECT_EQ(backend.write_voltage(0.0), HalStatus::timeout) << "cycle " << i;
+  }
+  EXPECT_EQ(backend.counters().garbage_frames, 0u);
+  EXPECT_GE(backend.counters().late_replies, 8u) << "the held replies arrive within the next request's wait";
+  raw.set_mode(test::RawModbusServer::Mode::correct);
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::timeout);  // the last held reply, then its own (flushed)
+  EXPECT_EQ(backend.write_voltage(0.0), HalStatus::ok);
+  raw.set_mode(test::RawModbusServer::Mode::garbage);  // its first variant: a well-formed reply to another transaction
+  EXPECT_EQ(backend.read_displacement(y), HalStatus::invalid_reply);
+  EXPECT_EQ(backend.counters().garbage_frames, 1u);
   EXPECT_TRUE(backend.link_up());
 }

@@ -51,9 +51,7 @@ TEST(ModbusNoAllocation, CyclesAgainstThePymodbusServerAllocateNothing) {
 
 TEST(ModbusNoAllocation, GarbageExceptionAndDisconnectedPathsAllocateNothing) {
   test::RawModbusServer raw;
-  auto cfg = test::plant_modbus_config(raw.port());
-  cfg.monitor_voltage.reset();
-  cfg.monitor_current.reset();
+  auto cfg = test::raw_server_modbus_config(raw.port());
   cfg.reconnect_after_failures = 8;
   cfg.reconnect_min_s = 5.0;  // stay down while we measure
   hal::ModbusBackend backend(cfg);

@@ -32,4 +32,13 @@ inline hal::ModbusConfig plant_modbus_config(int port, double period_s = 0.020) 
   return c;
 }
 
+/// The same map without the amplifier monitors, for test::RawModbusServer (whose
+/// block would trip them: it is for protocol faults, not for the plant).
+inline hal::ModbusConfig raw_server_modbus_config(int port) {
+  hal::ModbusConfig c = plant_modbus_config(port);
+  c.monitor_voltage.reset();
+  c.monitor_current.reset();
+  return c;
+}
+
 }  // namespace pvcgel::test

@@ -12,6 +12,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -27,8 +28,10 @@ class RawModbusServer {
   /// correct; garbage (malformed frames); exception (server device failure);
   /// late_once (the next reply correct but held back until the request after it arrives, then sent
   /// together with that request's own reply in one segment, then correct: a late reply that lands
-  /// inside the next transaction, however the threads are scheduled).
-  enum class Mode : int { correct, garbage, exception, late_once };
+  /// inside the next transaction, however the threads are scheduled); one_behind (every reply held
+  /// back until the next request arrives, then sent alone: each transaction receives the answer to
+  /// the one before it, as from a server that has fallen behind and stays behind).
+  enum class Mode : int { correct, garbage, exception, late_once, one_behind };
 
   RawModbusServer() {
     listen_fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
@@ -125,6 +128,13 @@ class RawModbusServer {
         if (mode == Mode::late_once && held_size == 0) {
           held = frame;  // sent with the next request's reply
           held_size = at;
+          continue;
+        }
+        if (mode == Mode::one_behind) {  // send the held reply alone, hold this one
+          if (held_size > 0 && ::send(fd, held.data(), held_size, MSG_NOSIGNAL) < 0) break;
+          std::copy(frame.begin() + static_cast<std::ptrdiff_t>(held_size), frame.begin() + static_cast<std::ptrdiff_t>(at),
+                    held.begin());
+          held_size = at - held_size;
           continue;
         }
         for (size_t i = 0; i < held_size; ++i) frame[i] = held[i];
