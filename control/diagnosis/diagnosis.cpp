@@ -254,13 +254,14 @@ DataScale align_and_baseline(DiagnosisResult& res, Problem& problem, const std::
   return data_scale(data, base.y, res.held_out);
 }
 
-/// 2. Nuisance-only refit of the nominal model (gain, G's time scale, f's shape within tolerance), the noise
+/// 2. Nuisance-only refit of the nominal model (gain, G's time scale, f's shape within tolerance; from the
+/// nominal and from `narrow`, the refit at the ordinary tolerances when these are widened), the noise
 /// estimated from its residual, 3. the none test on it and the mismatch windows. Returns its prediction.
 Prediction refit_and_test(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DiagnosisOptions& o,
-                          Nominal& k) {
-  k = refit_nominal(problem, o);
+                          Nominal& k, std::optional<Nominal> narrow) {
+  k = refit_nominal(problem, o, narrow);
   // The starts once more with the refitted model (with the nominal, far off, they trade for its error).
-  if (refine_starts(problem, data, o, k)) k = refit_nominal(problem, o);
+  if (refine_starts(problem, data, o, k)) k = refit_nominal(problem, o, narrow);
   res.alignment.initial_V = problem.initial();
   auto refit = problem.predict({}, k, true);
   auto& r = res.nominal_refit;
@@ -384,14 +385,17 @@ struct PassStart {
   bool none = false;
 };
 
+/// `narrow`: the nuisance-only refit at the ordinary tolerances, a second start when `o` widens them (a wide
+/// refit from the nominal alone can step far into a worse basin: f's shape to its bound, the start state
+/// beyond the recorded voltages).
 PassStart start_pass(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& o,
-                     const std::optional<SecondPass>& second) {
+                     const std::optional<SecondPass>& second, std::optional<Nominal> narrow = std::nullopt) {
   DiagnosisResult res;
   hold_out(res, data, o);
   Problem problem(model, data, res.held_out, o);
   const DataScale scale = align_and_baseline(res, problem, data, o, second);
   Nominal k;
-  auto refit = refit_and_test(res, problem, data, o, k);
+  auto refit = refit_and_test(res, problem, data, o, k, narrow);
   const bool none = decide_none(res, refit, o);
   return {std::move(res), std::move(problem), scale, k, std::move(refit), none};
 }
@@ -417,13 +421,15 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
   DiagnosisOptions o = widened_from.empty() ? options : widened_tolerances(options);  // the tolerances in force
   bool shape_tried = !widened_from.empty();  // the refit with a wider curve ran (or this pass is wide)
   std::optional<PassStart> begun = std::move(widened.start);
+  std::optional<Nominal> narrow;  // the ordinary pass's refit, once widened
   for (;;) {
-    auto [res, problem, scale, k, refit, none] = begun ? *std::move(begun) : start_pass(model, data, o, second);
+    auto [res, problem, scale, k, refit, none] = begun ? *std::move(begun) : start_pass(model, data, o, second, narrow);
     begun.reset();
     if (!none && o.widen_off_nominal && widened_from.empty() && !shape_tried) {
       widened_from = static_curve_off(res.nominal_refit);
       if (!widened_from.empty()) {
         o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
+        narrow = k;
         earlier_simulations += problem.simulations();
         continue;
       }
@@ -431,7 +437,7 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
       // and next term free to widened_tolerances); effects are fitted wider only in a second diagnosis that
       // must predict the held-out data better (a dead zone or a saturation may be what bends the curve).
       if (auto off = shape_off(res.nominal_refit); !off.empty()) {
-        auto wide = start_pass(model, data, widened_tolerances(options), std::nullopt);
+        auto wide = start_pass(model, data, widened_tolerances(options), std::nullopt, k);
         if (wide.none) {
           wide.res.nominal_refit.widened_from = std::move(off);
           wide.res.simulations = earlier_simulations + problem.simulations() + wide.problem.simulations();

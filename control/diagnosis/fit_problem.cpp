@@ -519,11 +519,16 @@ double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {
   return r.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(r.size(), 1));
 }
 
-Nominal refit_nominal(Problem& p, const DiagnosisOptions& o) {
+Nominal refit_nominal(Problem& p, const DiagnosisOptions& o, std::optional<Nominal> also_from) {
   FitSpace space({}, DataScale{}, true, o);  // no effect: the data scale is not used
   double cost = 0.0;
-  const auto z = fit_staged(p, space, space.z_of({}, Nominal{}), cost);
-  return space.g_scale(z);
+  Nominal best = space.g_scale(fit_staged(p, space, space.z_of({}, Nominal{}), cost));
+  if (also_from) {
+    double other_cost = 0.0;
+    const Nominal other = space.g_scale(fit_staged(p, space, space.z_of({}, *also_from), other_cost));
+    if (other_cost < cost) best = other;
+  }
+  return best;
 }
 
 }  // namespace pvcgel::control::diagnosis::detail

@@ -321,8 +321,9 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
 /// Fit-segment MSE of effects `e` with the nominal refitted as `k`.
 double fit_mse(Problem& p, std::span<const Effect> e, Nominal k);
 
-/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection).
-Nominal refit_nominal(Problem& p, const DiagnosisOptions& o);
+/// The nuisance-only refit: G's time scale and f's shape by least squares (gain, offset, start by projection),
+/// from the nominal and, when given, from `also_from` (the lower cost wins).
+Nominal refit_nominal(Problem& p, const DiagnosisOptions& o, std::optional<Nominal> also_from = std::nullopt);
 
 /// The nominal refit a candidate was fitted jointly with.
 inline Nominal nominal_of(const CandidateResult& c) { return {c.time_scale, c.poly_shape, c.poly_next}; }

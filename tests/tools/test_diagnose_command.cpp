@@ -467,6 +467,16 @@ TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWider
       EffectKind::saturation);
 }
 
+TEST(DiagnoseIndependentCases, AWidenedNuisanceRefitStartsFromTheOrdinaryOneToo) {
+  // Case 95 of the evaluation set, cut to 20 s (tests/data/wide_refit_from_narrow/README.md): the static
+  // curve is far off, so the tolerances widen. From the nominal alone the wide refit stepped f's shape to
+  // its lower bound, where the start state lies beyond the recorded voltages, and stayed at 4.5x the noise.
+  const auto o = diagnose_data("wide_refit_from_narrow", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_TRUE(r.nominal_refit.widened()) << o.summary;
+  EXPECT_LT(r.nominal_refit.errors.rmse_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop) {
   // A case of the independent generator (tests/data/asymmetric_slow_pole/README.md): the slow mode alone
   // relaxes 8% slower than it contracts, tracked in closed loop. Scaling all of G's time constants by
