@@ -105,7 +105,8 @@ struct DataScale {
   /// The largest and smallest scales: a file's parameters (nothing recorded to
   /// scale by) are checked against the union of their bounds, physical limits only.
   static DataScale unbounded(double sample_time_s) noexcept {
-    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12, .y_min_um = -1e12, .y_max_um = 1e12, .delay_samples_max = kMaxDelaySamples};
+    return {.sample_time_s = sample_time_s, .duration_s = 1e300, .u_min_V = -1e12, .u_max_V = 1e12,
+            .y_min_um = -1e12, .y_max_um = 1e12, .delay_samples_max = kMaxDelaySamples};
   }
   static DataScale tiny(double sample_time_s) noexcept {
     return {.sample_time_s = sample_time_s, .duration_s = 0.0, .u_min_V = -1e-12, .u_max_V = 1e-12,

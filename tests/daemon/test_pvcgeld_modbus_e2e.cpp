@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 #include <sstream>
 
 #include "support/modbus_peer.hpp"
@@ -72,6 +73,19 @@ struct Daemon {
   [[nodiscard]] std::string err() const { return test::slurp(err_path); }
   bool wait_for_log(const std::string& s, double timeout_s) const {
     return test::wait_for([&] { return err().find(s) != std::string::npos; }, timeout_s);
+  }
+  /// The first of `reasons` the log names as "fault <reason>" (the later one in the list if several),
+  /// waiting up to timeout_s; empty if none.
+  [[nodiscard]] std::string wait_for_fault(std::initializer_list<const char*> reasons, double timeout_s) const {
+    std::string seen;
+    test::wait_for(
+        [&] {
+          for (const char* r : reasons)
+            if (err().find(std::string("fault ") + r) != std::string::npos) seen = r;
+          return !seen.empty();
+        },
+        timeout_s);
+    return seen;
   }
 };
 
@@ -163,15 +177,8 @@ TEST(PvcgeldModbusE2E, ServerKilledMidRunFaultsAndZeroVoltsIsWrittenFirstOnRecon
   server.kill();
   // The lost link is seen by whichever transaction of the cycle comes first: the
   // sensor read (hal_error) or the amplifier write (actuator_write_failed).
-  std::string reason;
-  ASSERT_TRUE(test::wait_for(
-      [&] {
-        for (const char* r : {"hal_error", "actuator_write_failed"})
-          if (d.err().find(std::string("fault ") + r) != std::string::npos) reason = r;
-        return !reason.empty();
-      },
-      5.0))
-      << d.err();
+  const std::string reason = d.wait_for_fault({"hal_error", "actuator_write_failed"}, 5.0);
+  ASSERT_FALSE(reason.empty()) << d.err();
   PlantServer again({.port = port, .journal = dir + "/after.txt"});
   ASSERT_TRUE(test::wait_for([&] { return !test::read_journal(dir + "/after.txt").empty(); }, 10.0)) << d.err();
   const auto after = test::read_journal(dir + "/after.txt");
@@ -203,15 +210,8 @@ TEST(PvcgeldModbusE2E, SlowServerFaultsWithATimeoutAfterTheConfiguredCount) {
   // them, so the third missed write can come first (actuator_write_failed). Either
   // is the configured count of timeouts. The late replies the loop receives meanwhile
   // are missed samples: a fault naming the link (hal_error) would be wrong.
-  std::string reason;
-  ASSERT_TRUE(test::wait_for(
-      [&] {
-        for (const char* r : {"sensor_timeout", "actuator_write_failed", "hal_error"})
-          if (d.err().find(std::string("fault ") + r) != std::string::npos) reason = r;
-        return !reason.empty();
-      },
-      5.0))
-      << d.err();
+  const std::string reason = d.wait_for_fault({"sensor_timeout", "actuator_write_failed", "hal_error"}, 5.0);
+  ASSERT_FALSE(reason.empty()) << d.err();
   EXPECT_NE(reason, "hal_error") << d.err();
   server.toggle_slow();
   d.child.signal(SIGTERM);
