@@ -1359,6 +1359,8 @@ def main():
     ap.add_argument("--only", default=None)
     ap.add_argument("--fast", action="store_true")
     ap.add_argument("--first", type=int, default=None, help="write only the first K cases of the plan")
+    ap.add_argument("--from", dest="start", type=int, default=0,
+                    help="begin at case index N (the same files as a full run: each case draws from its own index)")
     ap.add_argument("--mode", default=None, choices=[None, "tune", "eval", "subset"])
     ap.add_argument("--subset", action="store_true", help="subset constraints (<=1 kHz, <=30 s, <=2 recs)")
     ap.add_argument("--jobs", type=int, default=1)
@@ -1370,7 +1372,7 @@ def main():
     plan = plan_cases(a.cases, prng, a.only, mode)
     os.makedirs(a.out, exist_ok=True)
     K = a.first if a.first is not None else a.cases
-    tasks = [(i, plan[i], a.seed, a.fast, a.subset, a.out, a.closed) for i in range(K)]
+    tasks = [(i, plan[i], a.seed, a.fast, a.subset, a.out, a.closed) for i in range(a.start, K)]
     rows = []
     if a.jobs > 1:
         import multiprocessing as mp
