@@ -285,6 +285,13 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
   return c.effects.find('+') == std::string::npos ? o.verdict == c.effects : names_both(o.mixture, c.effects);
 }
 
+/// "; beside LEADER: a, b, c": the second effects fitted beside the leader, the best pair's first (none fitted: "").
+std::string seconds_tried(const SecondEffectTest& t) {
+  std::vector<std::string> seconds;
+  for (const PairTried& p : t.tried) seconds.push_back(p.effects[1]);
+  return t.tried.empty() ? "" : "; beside " + t.tried.front().effects[0] + ": " + join(seconds, ", ");
+}
+
 /// One case's line: the truth, the verdict and mixture, the score, the held-out ratio, the time, the
 /// leading candidates and the marks (widened, refit at bound, withheld second, ambiguous, error).
 std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
@@ -292,7 +299,8 @@ std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
   const std::string pair = !missed_mixture         ? ""
                            : o.pair.effects.empty() ? "  no pair fitted"
                                                     : "  best pair: " + join(o.pair.effects, "+") + " (" +
-                                                          join(second_effect_shortfalls(o.pair), ", ") + ")";
+                                                          join(second_effect_shortfalls(o.pair), ", ") + ")" +
+                                                          seconds_tried(o.pair);
   char line[1024];
   std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s%s\n",
                 c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
@@ -346,6 +354,9 @@ void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const 
   r.mixture_missed_single_at_noise += o.pair.single_at_the_noise();
   if (!names_both(join(o.pair.effects, "+"), c.effects)) {
     ++r.mixture_missed_other_pair;
+    r.mixture_other_pair_labels_fitted += std::any_of(o.pair.tried.begin(), o.pair.tried.end(), [&](const PairTried& p) {
+      return names_both(p.effects[0] + "+" + p.effects[1], c.effects);
+    });
   } else {
     ++r.mixture_missed_labels_pair;
     // A member not significant counts by which it is: the labels' dominant or the other.
@@ -456,9 +467,11 @@ std::string mixtures_missed(const DirectorySuiteResult& r) {
   if (missed == 0) return "";
   std::string why;
   for (const auto& [reason, n] : r.mixture_labels_pair_shortfalls) why += format("%s%s %d", why.empty() ? "" : ", ", reason.c_str(), n);
-  return format("mixtures without both named (%d), by the best pair fitted: another pair %d, none fitted %d, the labels' pair %d%s%s%s; "
+  return format("mixtures without both named (%d), by the best pair fitted: another pair %d (the labels' pair fitted too in %d), "
+                "none fitted %d, the labels' pair %d%s%s%s; "
                 "the best single effect alone at the noise (held-out RMSE within %.0f%% of it) in %d\n",
-                missed, r.mixture_missed_other_pair, r.mixture_missed_no_pair, r.mixture_missed_labels_pair,
+                missed, r.mixture_missed_other_pair, r.mixture_other_pair_labels_fitted, r.mixture_missed_no_pair,
+                r.mixture_missed_labels_pair,
                 why.empty() ? "" : " (", why.c_str(), why.empty() ? "" : ")", 100.0 * (kSingleAtTheNoise - 1.0),
                 r.mixture_missed_single_at_noise);
 }

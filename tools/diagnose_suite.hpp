@@ -81,6 +81,9 @@ struct DirectorySuiteResult {
   /// no pair fitted, another pair than the labels', or the labels' pair with what kept its second effect out
   /// (second_effect_shortfalls; a case with several counts under each).
   int mixture_missed_no_pair = 0, mixture_missed_other_pair = 0, mixture_missed_labels_pair = 0;
+  /// Of those with another pair best, how many had the labels' pair fitted too (SecondEffectTest::tried): the
+  /// rest never fitted the labels' second effect beside the leader.
+  int mixture_other_pair_labels_fitted = 0;
   /// Of those with a pair fitted, how many had their best single effect at the noise already (kSingleAtTheNoise).
   int mixture_missed_single_at_noise = 0;
   std::map<std::string, int> mixture_labels_pair_shortfalls;

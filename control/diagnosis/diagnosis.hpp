@@ -181,10 +181,21 @@ struct HeldOutTest {
   bool significant = false;
 };
 
+/// One pair fitted jointly (SecondEffectTest::tried): how well it fits, and the score the best pair is chosen by.
+struct PairTried {
+  std::array<std::string, 2> effects;  ///< the leader, then the second effect fitted beside it
+  double rmse_fit_um = 0.0;
+  double rmse_validation_um = 0.0;
+  double score = 0.0;  ///< the judging segment's MSE with the per-parameter penalty (Excess::score)
+};
+
 /// The test of the best pair of effects fitted (DiagnosisResult::second_effect_test): why a second effect was
 /// named or not, so that a mixture left unnamed can be followed up.
 struct SecondEffectTest {
   std::vector<std::string> effects;  ///< the pair fitted, the larger contribution first (empty: no pair fitted)
+  /// Every pair fitted, the lowest score (the best pair) first: whether a second effect was fitted at all
+  /// beside the leader, and how close the others came.
+  std::vector<PairTried> tried;
   double rmse_validation_um = 0.0;   ///< the pair's held-out RMSE
   /// Per member: the pair against the other member alone on held-out blocks (its contribution, mean_um2).
   std::array<HeldOutTest, 2> member{};

@@ -275,8 +275,12 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
     p.errors = errors_of(data, pred.y, res.held_out);
     p.y = std::move(pred.y);
     p.score = Excess(res).score(p.errors, spaces[i].specs.size() - 1 - unused_parameters(p.effects), o);
+    res.second_effect_test.tried.push_back({{std::string(to_string(leader.kind)), std::string(to_string(plans[i].second.kind))},
+                                            p.errors.rmse_fit_um, p.errors.rmse_validation_um, p.score});
     if (p.score < best.score) best = std::move(p);
   }
+  auto& tried = res.second_effect_test.tried;
+  std::stable_sort(tried.begin(), tried.end(), [](const PairTried& a, const PairTried& b) { return a.score < b.score; });
   return best;
 }
 

@@ -427,6 +427,17 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
   EXPECT_NE(o.summary.find("best pair: hysteresis + dead_zone"), std::string::npos) << o.summary;
   EXPECT_NE(o.summary.find("not named (withheld)"), std::string::npos) << o.summary;
   EXPECT_NE(read(a.json).find("\"second_effect_test\": {\"effects\": [\"hysteresis\", \"dead_zone\"]"), std::string::npos);
+  // Every pair fitted, the best (the one tested) first: the leader beside each second effect tried.
+  ASSERT_GE(t.tried.size(), 2u) << o.summary;
+  EXPECT_EQ(t.tried.front().effects, (std::array<std::string, 2>{"hysteresis", "dead_zone"})) << o.summary;
+  EXPECT_DOUBLE_EQ(t.tried.front().rmse_validation_um, t.rmse_validation_um) << o.summary;
+  for (size_t i = 1; i < t.tried.size(); ++i) {
+    EXPECT_LE(t.tried[i - 1].score, t.tried[i].score) << o.summary;
+    EXPECT_EQ(t.tried[i].effects[0], "hysteresis") << o.summary;
+    EXPECT_NE(t.tried[i].effects[1], "dead_zone") << "each second effect once";
+  }
+  EXPECT_NE(read(a.json).find("\"pairs_tried\": [{\"effects\": [\"hysteresis\", \"dead_zone\"], \"rmse_fit_um\": "),
+            std::string::npos);
   // The best single effect's held-out RMSE over the noise, in both.
   EXPECT_GT(t.single_over_noise, 0.0) << o.summary;
   EXPECT_NE(o.summary.find("the best single effect alone leaves " + control::format("%.3g", t.single_over_noise) + "x the noise"),
@@ -566,12 +577,14 @@ TEST(DiagnoseIndependentSuite, MixturesLeftUnnamedAreCountedByTheBestPairAndWhat
   r.cases = r.mixture_cases = 10;
   r.mixture_both_named = 4;
   r.mixture_missed_other_pair = 3;
+  r.mixture_other_pair_labels_fitted = 1;
   r.mixture_missed_no_pair = 1;
   r.mixture_missed_labels_pair = 2;
   r.mixture_labels_pair_shortfalls = {{"the other not significant", 2}, {"not material", 1}};
   r.mixture_missed_single_at_noise = 2;
   const auto text = format_directory_suite(r);
-  EXPECT_NE(text.find("mixtures without both named (6), by the best pair fitted: another pair 3, none fitted 1, the labels' "
+  EXPECT_NE(text.find("mixtures without both named (6), by the best pair fitted: another pair 3 (the labels' pair fitted "
+                      "too in 1), none fitted 1, the labels' "
                       "pair 2 (not material 1, the other not significant 2); the best single effect alone at the noise "
                       "(held-out RMSE within 5% of it) in 2"),
             std::string::npos)
@@ -670,6 +683,7 @@ TEST(DiagnoseIndependentSuite, FixedSubsetRegressionFloor) {
   // Every mixture left unnamed is counted once under its best pair.
   EXPECT_EQ(r.mixture_missed_no_pair + r.mixture_missed_other_pair + r.mixture_missed_labels_pair,
             r.mixture_cases - r.mixture_both_named);
+  EXPECT_LE(r.mixture_other_pair_labels_fitted, r.mixture_missed_other_pair);
 }
 
 }  // namespace
