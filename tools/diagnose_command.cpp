@@ -391,14 +391,16 @@ std::string second_effect_test_json(const SecondEffectTest& t) {
       << ", \"signed_rank_p\": " << number_or_null(m.signed_rank_p) << ", \"blocks\": " << m.blocks
       << ", \"significant\": " << (m.significant ? "true" : "false") << "}";
   }
-  j << "], \"explains_excess\": " << (t.explained ? "true" : "false") << ", \"material\": " << (t.material ? "true" : "false")
-    << ", \"named\": " << (t.named ? "true" : "false") << ", \"single_over_noise\": " << number_or_null(t.single_over_noise)
-    << ", \"pairs_tried\": [";
+  j << "], \"explains_excess\": " << (t.explained ? "true" : "false")
+    << ", \"material\": " << (t.material ? "true" : "false")
+    << ", \"named\": " << (t.named ? "true" : "false")
+    << ", \"single_over_noise\": " << number_or_null(t.single_over_noise) << ", \"pairs_tried\": [";
   for (size_t i = 0; i < t.tried.size(); ++i) {
     const PairTried& p = t.tried[i];
-    j << (i ? ", " : "") << "{\"effects\": [" << quoted(p.effects[0]) << ", " << quoted(p.effects[1])
-      << "], \"rmse_fit_um\": " << number_or_null(p.rmse_fit_um) << ", \"rmse_validation_um\": "
-      << number_or_null(p.rmse_validation_um) << ", \"score\": " << number_or_null(p.score) << "}";
+    j << (i ? ", " : "") << "{\"effects\": " << quoted_array(p.effects)
+      << ", \"rmse_fit_um\": " << number_or_null(p.rmse_fit_um)
+      << ", \"rmse_validation_um\": " << number_or_null(p.rmse_validation_um)
+      << ", \"score\": " << number_or_null(p.score) << "}";
   }
   j << "]}";
   return j.str();

@@ -355,7 +355,7 @@ void tally_missed_mixture(DirectorySuiteResult& r, const LabelledCase& c, const 
   if (!names_both(join(o.pair.effects, "+"), c.effects)) {
     ++r.mixture_missed_other_pair;
     r.mixture_other_pair_labels_fitted += std::any_of(o.pair.tried.begin(), o.pair.tried.end(), [&](const PairTried& p) {
-      return names_both(p.effects[0] + "+" + p.effects[1], c.effects);
+      return names_both(join(p.effects, "+"), c.effects);
     });
   } else {
     ++r.mixture_missed_labels_pair;

@@ -183,7 +183,7 @@ struct HeldOutTest {
 
 /// One pair fitted jointly (SecondEffectTest::tried): how well it fits, and the score the best pair is chosen by.
 struct PairTried {
-  std::array<std::string, 2> effects;  ///< the leader, then the second effect fitted beside it
+  std::vector<std::string> effects;  ///< the leader, then the second effect fitted beside it
   double rmse_fit_um = 0.0;
   double rmse_validation_um = 0.0;
   double score = 0.0;  ///< the judging segment's MSE with the per-parameter penalty (Excess::score)

@@ -429,7 +429,7 @@ TEST(DiagnoseWithheldSecond, ADeadZoneThatImitatesFsShapeAtItsBoundIsWithheldNot
   EXPECT_NE(read(a.json).find("\"second_effect_test\": {\"effects\": [\"hysteresis\", \"dead_zone\"]"), std::string::npos);
   // Every pair fitted, the best (the one tested) first: the leader beside each second effect tried.
   ASSERT_GE(t.tried.size(), 2u) << o.summary;
-  EXPECT_EQ(t.tried.front().effects, (std::array<std::string, 2>{"hysteresis", "dead_zone"})) << o.summary;
+  EXPECT_EQ(t.tried.front().effects, (std::vector<std::string>{"hysteresis", "dead_zone"})) << o.summary;
   EXPECT_DOUBLE_EQ(t.tried.front().rmse_validation_um, t.rmse_validation_um) << o.summary;
   for (size_t i = 1; i < t.tried.size(); ++i) {
     EXPECT_LE(t.tried[i - 1].score, t.tried[i].score) << o.summary;
