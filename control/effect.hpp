@@ -100,6 +100,11 @@ struct DataScale {
     return y_min_um >= 0.0 ? y_min_um : (y_max_um <= 0.0 ? -y_max_um : 0.0);
   }
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
+  /// The |command| nearest zero (0 when the commands cross zero): a closed loop about a bias records no
+  /// voltage below hundreds of volts.
+  [[nodiscard]] double u_abs_nearest_V() const noexcept {
+    return u_min_V >= 0.0 ? u_min_V : (u_max_V <= 0.0 ? -u_max_V : 0.0);
+  }
   [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }
   /// The largest and smallest scales: a file's parameters (nothing recorded to

@@ -7,12 +7,15 @@
 
 #include "control/config_error.hpp"
 #include "control/diagnosis/mode_hint.hpp"
+#include "control/text_format.hpp"
 
 namespace pvcgel::control::diagnosis::detail {
 
 namespace {
 constexpr size_t kModeHints = 2;       ///< residual peaks a mode's grid also starts from
 constexpr double kHintDamping = 0.02;  ///< the damping ratio a mode found as a narrow peak starts from
+/// How far above a dead zone's threshold the smallest recorded |command| may lie for the recordings to show it.
+constexpr double kThresholdReach = 10.0;
 }  // namespace
 
 const CandidateResult* fitted_candidate(const DiagnosisResult& res, EffectKind k) {
@@ -313,8 +316,17 @@ void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, 
     auto& b = best[tasks[i].candidate][tasks[i].space];
     if (b.z.size() == 0 || fits[i].cost < b.cost) b = std::move(fits[i]);
   }
-  for (size_t w = 0; w < which.size(); ++w)
+  for (size_t w = 0; w < which.size(); ++w) {
     finish_candidate(candidates[which[w]], spaces[w], best[w], held_out, problem, data, o);
+    candidates[which[w]].unobserved = unobserved_by(candidates[which[w]].effect, scale);
+  }
+}
+
+std::string unobserved_by(const Effect& e, const DataScale& scale) {
+  if (e.kind != EffectKind::dead_zone || !(e.p[0] * kThresholdReach < scale.u_abs_nearest_V())) return {};
+  return format("its threshold (%.3g V) lies below a tenth of the smallest recorded |command| (%.3g V): the recordings "
+                "never come near it, and its catch-up alone is a corner in the static curve that other effects make too",
+                e.p[0], scale.u_abs_nearest_V());
 }
 
 /// Whether the fitting segment separates candidates `a` and `b` that the held-out data cannot: `a`
@@ -334,7 +346,7 @@ namespace {
 /// of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
 /// its low-frequency gain), the one that explains the fitting segment clearly better leads.
 void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
-  if (res.candidates.size() < 2 || !res.candidates[1].fitted) return;
+  if (res.candidates.size() < 2 || !res.candidates[1].fitted || !res.candidates[1].unobserved.empty()) return;
   const Excess excess(res);
   const auto& a = res.candidates[0];
   const auto& b = res.candidates[1];
@@ -348,7 +360,9 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
 /// the excess (a tuning case of bias-dependent dynamics in closed loop: a delay leaving all of it ranked above
 /// the dynamics leaving a fifth), and the verdict was then `unexplained`.
 void lead_with_an_explanation(DiagnosisResult& res, const Excess& excess, const DiagnosisOptions& o) {
-  const auto explains = [&](const CandidateResult& c) { return c.fitted && excess.explained_by(c.errors, o); };
+  const auto explains = [&](const CandidateResult& c) {
+    return c.fitted && c.unobserved.empty() && excess.explained_by(c.errors, o);
+  };
   if (res.candidates.empty() || explains(res.candidates.front())) return;
   const auto it = std::find_if(res.candidates.begin(), res.candidates.end(), explains);
   if (it != res.candidates.end()) std::rotate(res.candidates.begin(), it, std::next(it));
@@ -363,8 +377,10 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   const Excess excess(res);
   for (auto& c : res.candidates)
     if (c.fitted) c.score = excess.score(c.errors, c.specs.size() - unused_parameters({&c.effect, 1}), o);
-  std::stable_sort(res.candidates.begin(), res.candidates.end(), [](const CandidateResult& a, const CandidateResult& b) {
-    if (a.fitted != b.fitted) return a.fitted;
+  // Fitted and observed, then fitted but unobserved, then the rest.
+  const auto tier = [](const CandidateResult& c) { return !c.fitted ? 2 : (c.unobserved.empty() ? 0 : 1); };
+  std::stable_sort(res.candidates.begin(), res.candidates.end(), [&](const CandidateResult& a, const CandidateResult& b) {
+    if (tier(a) != tier(b)) return tier(a) < tier(b);
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;
   });
   break_tie(res, o);

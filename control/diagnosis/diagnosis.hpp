@@ -114,6 +114,9 @@ struct CandidateResult {
   std::vector<ParameterSpec> specs;
   double evidence_r2 = 0.0;  ///< share of the fit-segment residual variance its best coarse-grid member explains
   bool fitted = false;       ///< refined by least squares (the leading candidates only)
+  /// Why the recordings cannot show this fit as its physics (unobserved_by), so it is ranked after every
+  /// candidate they can show and never named; empty when they can.
+  std::string unobserved;
   ModelErrors errors;
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it

@@ -275,6 +275,9 @@ PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Seri
     p.errors = errors_of(data, pred.y, res.held_out);
     p.y = std::move(pred.y);
     p.score = Excess(res).score(p.errors, spaces[i].specs.size() - 1 - unused_parameters(p.effects), o);
+    // A member the recordings cannot show (unobserved_by) is not a pair that may be named.
+    if (std::any_of(p.effects.begin(), p.effects.end(), [&](const Effect& e) { return !unobserved_by(e, scale).empty(); }))
+      p.score = INFINITY;
     res.second_effect_test.tried.push_back({{std::string(to_string(leader.kind)), std::string(to_string(plans[i].second.kind))},
                                             p.errors.rmse_fit_um, p.errors.rmse_validation_um, p.score});
     if (p.score < best.score) best = std::move(p);

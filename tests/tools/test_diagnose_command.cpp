@@ -513,6 +513,23 @@ TEST(DiagnoseIndependentCases, ACandidateThatExplainsTheExcessLeadsOneThatDoesNo
   EXPECT_LE(control::diagnosis::excess_share_left(r, r.candidates.front().errors), 0.5) << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, ADeadZoneTheCommandsNeverComeNearIsNotNamedInPlaceOfALoop) {
+  // Evaluation case134 (tests/data/dead_zone_never_reached/README.md): a small loop in closed loop about
+  // 390 V, no command below 323 V. A dead zone at 10.6 V, whose catch-up to 432 V put a corner in the
+  // static curve, led the loop by its penalty alone and was the verdict.
+  const auto o = diagnose_data("dead_zone_never_reached", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "hysteresis") << o.summary;
+  for (const auto& e : r.mixture) EXPECT_NE(e.kind, EffectKind::dead_zone) << o.summary;
+  EXPECT_EQ(std::find(r.ambiguous_with.begin(), r.ambiguous_with.end(), "dead_zone"), r.ambiguous_with.end()) << o.summary;
+  const auto dead_zone = std::find_if(r.candidates.begin(), r.candidates.end(),
+                                      [](const auto& c) { return c.effect.kind == EffectKind::dead_zone; });
+  ASSERT_NE(dead_zone, r.candidates.end());
+  ASSERT_TRUE(dead_zone->fitted) << o.summary;
+  EXPECT_LT(dead_zone->effect.p[0], 32.0) << "threshold_V\n" << o.summary;
+  EXPECT_NE(dead_zone->explanation.find("; not named: its threshold"), std::string::npos) << dead_zone->explanation;
+}
+
 TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
