@@ -346,7 +346,7 @@ namespace {
 /// of the nuisance-only excess: a mode that the held-out stretch hardly excites and a creep that reproduces
 /// its low-frequency gain), the one that explains the fitting segment clearly better leads.
 void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
-  if (res.candidates.size() < 2 || !res.candidates[1].fitted || !res.candidates[1].unobserved.empty()) return;
+  if (res.candidates.size() < 2 || !res.candidates[1].nameable()) return;
   const Excess excess(res);
   const auto& a = res.candidates[0];
   const auto& b = res.candidates[1];
@@ -360,9 +360,7 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
 /// the excess (a tuning case of bias-dependent dynamics in closed loop: a delay leaving all of it ranked above
 /// the dynamics leaving a fifth), and the verdict was then `unexplained`.
 void lead_with_an_explanation(DiagnosisResult& res, const Excess& excess, const DiagnosisOptions& o) {
-  const auto explains = [&](const CandidateResult& c) {
-    return c.fitted && c.unobserved.empty() && excess.explained_by(c.errors, o);
-  };
+  const auto explains = [&](const CandidateResult& c) { return c.nameable() && excess.explained_by(c.errors, o); };
   if (res.candidates.empty() || explains(res.candidates.front())) return;
   const auto it = std::find_if(res.candidates.begin(), res.candidates.end(), explains);
   if (it != res.candidates.end()) std::rotate(res.candidates.begin(), it, std::next(it));
@@ -378,7 +376,7 @@ void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   for (auto& c : res.candidates)
     if (c.fitted) c.score = excess.score(c.errors, c.specs.size() - unused_parameters({&c.effect, 1}), o);
   // Fitted and observed, then fitted but unobserved, then the rest.
-  const auto tier = [](const CandidateResult& c) { return !c.fitted ? 2 : (c.unobserved.empty() ? 0 : 1); };
+  const auto tier = [](const CandidateResult& c) { return c.nameable() ? 0 : (c.fitted ? 1 : 2); };
   std::stable_sort(res.candidates.begin(), res.candidates.end(), [&](const CandidateResult& a, const CandidateResult& b) {
     if (tier(a) != tier(b)) return tier(a) < tier(b);
     return a.fitted ? a.score < b.score : a.evidence_r2 > b.evidence_r2;

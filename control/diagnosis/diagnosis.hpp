@@ -117,6 +117,8 @@ struct CandidateResult {
   /// Why the recordings cannot show this fit as its physics (unobserved_by), so it is ranked after every
   /// candidate they can show and never named; empty when they can.
   std::string unobserved;
+  /// Fitted, and the recordings can show it: it may lead, be named, alone or in a pair, or be ambiguous.
+  [[nodiscard]] bool nameable() const noexcept { return fitted && unobserved.empty(); }
   ModelErrors errors;
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it

@@ -45,7 +45,7 @@ void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisO
   const auto& best = res.candidates.front();
   for (size_t i = 1; i < res.candidates.size(); ++i) {
     const auto& c = res.candidates[i];
-    if (c.fitted && c.unobserved.empty() && excess.explained_by(c.errors, o) &&
+    if (c.nameable() && excess.explained_by(c.errors, o) &&
         excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base &&
         !fit_segment_prefers(best, c, res, o, o.ambiguity_fit_gain))
       res.ambiguous_with.emplace_back(to_string(c.effect.kind));
@@ -183,11 +183,10 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   const Excess excess(res);
   res.candidates_judged_on = excess.on_validation ? "held_out" : "fitting_segment";
   PairFit pair;
-  const auto observed_fit = [](const CandidateResult& c) { return c.fitted && c.unobserved.empty(); };
-  if (observed_fit(res.candidates.front()) && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
+  if (res.candidates.front().nameable() && excess.base > 0.0) pair = best_pair(res, problem, data, scale, o);
   if (std::isfinite(pair.score)) refit_members_alone(res, pair, problem, data, scale, o);
   const auto& best = res.candidates.front();
-  const bool single_ok = observed_fit(best) && excess.explained_by(best.errors, o);
+  const bool single_ok = best.nameable() && excess.explained_by(best.errors, o);
   bool pair_ok = std::isfinite(pair.score) && judge_pair(res, pair, problem, data, excess, o);
   if (pair_ok && single_ok && o.pair_refit_inside) pair_ok = !withhold_second(res, pair, problem, data, scale, o);
   res.second_effect_test.named = pair_ok;
