@@ -77,6 +77,11 @@ inline constexpr double kFittedDelaySamples = 236.0;
 /// line to the delay at construction, so a delay fitted on a 100 Hz recording runs in a 1 kHz sim.
 inline constexpr double kMaxDelaySamples = 65536.0;
 
+/// The |value| nearest zero of the range lo..hi (0 when the range crosses zero).
+[[nodiscard]] constexpr double abs_nearest_zero(double lo, double hi) noexcept {
+  return lo >= 0.0 ? lo : (hi <= 0.0 ? -hi : 0.0);
+}
+
 /// The size of what was recorded: parameter bounds and starting points scale
 /// with it, so the same candidates work from millivolt amplifier inputs to a
 /// kilovolt, nanometre to millimetre strokes and 100 Hz to 10 kHz sampling.
@@ -97,13 +102,13 @@ struct DataScale {
   /// The |displacement| nearest zero of a one-signed stroke (0 when it crosses zero): a sensor zeroed
   /// elsewhere records a stroke from 74 to 125 um, whose stop lies within that range, not within 0..125.
   [[nodiscard]] double y_abs_nearest_um() const noexcept {
-    return y_min_um >= 0.0 ? y_min_um : (y_max_um <= 0.0 ? -y_max_um : 0.0);
+    return abs_nearest_zero(y_min_um, y_max_um);
   }
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
   /// The |command| nearest zero (0 when the commands cross zero): a closed loop about a bias records no
   /// voltage below hundreds of volts.
   [[nodiscard]] double u_abs_nearest_V() const noexcept {
-    return u_min_V >= 0.0 ? u_min_V : (u_max_V <= 0.0 ? -u_max_V : 0.0);
+    return abs_nearest_zero(u_min_V, u_max_V);
   }
   [[nodiscard]] double u_span_V() const noexcept { return std::max(u_max_V - u_min_V, 1e-9); }
   [[nodiscard]] double u_abs_V() const noexcept { return std::max({std::abs(u_min_V), std::abs(u_max_V), 1e-9}); }

@@ -203,6 +203,16 @@ TEST(Effect, ASaturationIsOnTheDisplacementOrOnTheDriveNothingBetween) {
   }
 }
 
+TEST(DataScale, TheValueNearestZeroIsTheRangesNearEndOrZeroWhenItCrossesZero) {
+  EXPECT_EQ(abs_nearest_zero(324.0, 456.0), 324.0);
+  EXPECT_EQ(abs_nearest_zero(-456.0, -324.0), 324.0);
+  EXPECT_EQ(abs_nearest_zero(-150.0, 150.0), 0.0);
+  EXPECT_EQ(abs_nearest_zero(0.0, 1000.0), 0.0);
+  const DataScale scale{.u_min_V = 323.0, .u_max_V = 456.0, .y_min_um = -125.0, .y_max_um = -74.0};
+  EXPECT_EQ(scale.u_abs_nearest_V(), 323.0);
+  EXPECT_EQ(scale.y_abs_nearest_um(), 74.0);
+}
+
 TEST(AugmentedPlant, WholeSampleDelayShiftsTheOutput) {
   const auto u = voltage(3000);
   const auto y0 = run({}, u, u[0]);
