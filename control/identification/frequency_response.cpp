@@ -119,6 +119,93 @@ SineEstimate estimate_sine(const std::vector<double>& t, const std::vector<doubl
   return s;
 }
 
+namespace {
+
+/// Why the samples cannot be analysed at all (different lengths, too few, not finite), else empty.
+std::string record_problem(const std::vector<double>& t, const std::vector<double>& u, const std::vector<double>& y) {
+  const size_t n = t.size();
+  if (u.size() != n || y.size() != n) return "t_s, u_V and y_um have different lengths";
+  if (n < 20) return "fewer than 20 samples";
+  for (size_t k = 0; k < n; ++k)
+    if (!std::isfinite(t[k]) || !std::isfinite(u[k]) || !std::isfinite(y[k]))
+      return "non-finite sample at row " + std::to_string(k);
+  return {};
+}
+
+/// Clipping and distortion: the input must be the sinusoid the describing function assumes. Why it is not
+/// (over the analysed samples from `start`), else empty.
+std::string input_problem(const std::vector<double>& u, size_t start, const SineEstimate& s, double distortion,
+                          const ExtractionOptions& o) {
+  std::ostringstream os;
+  const auto [mn, mx] = std::minmax_element(u.begin() + static_cast<long>(start), u.end());
+  const double tol = 1e-3 * s.amplitude_V;
+  if (distortion > o.max_input_distortion) {
+    os << "u_V is not a clean sine (fit residual " << 100.0 * distortion << "% of A, limit "
+       << 100.0 * o.max_input_distortion << "%)";
+    if (*mx >= o.voltage_max_V - tol) os << ": clipped at " << *mx << " V (saturated at the upper limit)";
+    else if (*mn <= o.voltage_min_V + tol) os << ": clipped at " << *mn << " V (saturated at the lower limit)";
+  } else if (s.bias_V + s.amplitude_V > o.voltage_max_V + tol || s.bias_V - s.amplitude_V < o.voltage_min_V - tol) {
+    os << "the sine spans " << s.bias_V - s.amplitude_V << " .. " << s.bias_V + s.amplitude_V << " V, outside "
+       << o.voltage_min_V << " .. " << o.voltage_max_V << " V";
+  }
+  return os.str();
+}
+
+/// The analysed window's samples and the fit's reference time and half span.
+struct Window {
+  size_t start = 0, end = 0;
+  double t_ref_s = 0.0, half_span_s = 0.0;
+  Eigen::MatrixXd rhs;  ///< columns u, y over [start, end)
+};
+
+/// Per-period estimates of the response: their spread is the uncertainty (noise, drift, hysteresis and
+/// anything else that is not a stationary response shows up there). 0 with fewer than two periods.
+double per_period_sigma(const std::vector<double>& t, const Window& w, double period_samples, int periods,
+                        double omega, int harmonics) {
+  std::vector<std::complex<double>> per;
+  for (int p = 0; p < periods; ++p) {
+    const size_t b = w.start + static_cast<size_t>(std::llround(p * period_samples));
+    const size_t e = std::min(w.end, w.start + static_cast<size_t>(std::llround((p + 1) * period_samples)));
+    if (e <= b + 4) continue;
+    const Eigen::MatrixXd Xp = harmonic_basis(t, b, e, w.t_ref_s, w.half_span_s, omega, harmonics, false);
+    const Eigen::MatrixXd cp = Xp.householderQr().solve(
+        w.rhs.middleRows(static_cast<Eigen::Index>(b - w.start), static_cast<Eigen::Index>(e - b)));
+    per.push_back(phasor(cp.col(1), 1, 0) / phasor(cp.col(0), 1, 0));
+  }
+  if (per.size() < 2) return 0.0;
+  std::complex<double> mean{0.0, 0.0};
+  for (auto h : per) mean += h;
+  mean /= static_cast<double>(per.size());
+  double ss = 0.0;
+  for (auto h : per) ss += std::norm(h - mean);
+  const double m = static_cast<double>(per.size());
+  return std::sqrt(ss / (m - 1.0)) / std::sqrt(m);
+}
+
+/// The response, DC, drift and harmonics by the lock-in fit over the window, and their per-period spread.
+void fit_harmonics(FrequencyResponsePoint& P, const std::vector<double>& t, const std::vector<double>& u,
+                   const std::vector<double>& y, size_t start, double Ts, const ExtractionOptions& o) {
+  const size_t n = t.size();
+  // Harmonics up to 90% of Nyquist only.
+  const int H = std::max(1, std::min(o.harmonics, static_cast<int>(0.45 / (P.frequency_Hz * Ts))));
+  const double omega = 2.0 * kPi * P.frequency_Hz;
+  Window w{.start = start, .end = n, .t_ref_s = 0.5 * (t[start] + t[n - 1]),
+           .half_span_s = std::max(0.5 * (t[n - 1] - t[start]), Ts), .rhs = Eigen::MatrixXd(static_cast<Eigen::Index>(n - start), 2)};
+  for (size_t k = start; k < n; ++k) {
+    w.rhs(static_cast<Eigen::Index>(k - start), 0) = u[k];
+    w.rhs(static_cast<Eigen::Index>(k - start), 1) = y[k];
+  }
+  const Eigen::MatrixXd X = harmonic_basis(t, start, n, w.t_ref_s, w.half_span_s, omega, H, true);
+  const Eigen::MatrixXd coef = X.householderQr().solve(w.rhs);
+  P.response = phasor(coef.col(1), 2, 0) / phasor(coef.col(0), 2, 0);
+  P.dc_um = coef(0, 1);
+  P.drift_um_per_s = coef(1, 1) / w.half_span_s;
+  for (int k = 0; k < H; ++k) P.harmonic_um.push_back(std::abs(phasor(coef.col(1), 2, k)));
+  P.response_sigma = per_period_sigma(t, w, 1.0 / (P.frequency_Hz * Ts), P.periods, omega, H);
+}
+
+}  // namespace
+
 FrequencyResponsePoint extract_frequency_response(const std::vector<double>& t, const std::vector<double>& u,
                                                   const std::vector<double>& y, const ExtractionOptions& o,
                                                   std::string source) {
@@ -129,12 +216,8 @@ FrequencyResponsePoint extract_frequency_response(const std::vector<double>& t, 
     P.problem = why;
     return P;
   };
+  if (auto why = record_problem(t, u, y); !why.empty()) return flag(why);
   const size_t n = t.size();
-  if (u.size() != n || y.size() != n) return flag("t_s, u_V and y_um have different lengths");
-  if (n < 20) return flag("fewer than 20 samples");
-  for (size_t k = 0; k < n; ++k)
-    if (!std::isfinite(t[k]) || !std::isfinite(u[k]) || !std::isfinite(y[k]))
-      return flag("non-finite sample at row " + std::to_string(k));
   const double Ts = (t.back() - t.front()) / static_cast<double>(n - 1);
   size_t begin = 0;
   while (begin < n && t[begin] - t.front() < o.settle_s - 0.5 * Ts) ++begin;
@@ -165,63 +248,9 @@ FrequencyResponsePoint extract_frequency_response(const std::vector<double>& t, 
   const size_t start = n - std::min(L, n - begin);
   P.window_start_s = t[start] - t.front();
   P.window_end_s = t.back() - t.front() + Ts;
+  if (auto why = input_problem(u, start, s, P.input_distortion, o); !why.empty()) return flag(why);
 
-  // Clipping and distortion: the input must be the sinusoid the describing function assumes.
-  const auto [mn, mx] = std::minmax_element(u.begin() + static_cast<long>(start), u.end());
-  const double tol = 1e-3 * s.amplitude_V;
-  if (P.input_distortion > o.max_input_distortion) {
-    os << "u_V is not a clean sine (fit residual " << 100.0 * P.input_distortion << "% of A, limit "
-       << 100.0 * o.max_input_distortion << "%)";
-    if (*mx >= o.voltage_max_V - tol) os << ": clipped at " << *mx << " V (saturated at the upper limit)";
-    else if (*mn <= o.voltage_min_V + tol) os << ": clipped at " << *mn << " V (saturated at the lower limit)";
-    return flag(os.str());
-  }
-  if (s.bias_V + s.amplitude_V > o.voltage_max_V + tol || s.bias_V - s.amplitude_V < o.voltage_min_V - tol) {
-    os << "the sine spans " << s.bias_V - s.amplitude_V << " .. " << s.bias_V + s.amplitude_V << " V, outside "
-       << o.voltage_min_V << " .. " << o.voltage_max_V << " V";
-    return flag(os.str());
-  }
-
-  // Harmonics up to 90% of Nyquist only.
-  const int H = std::max(1, std::min(o.harmonics, static_cast<int>(0.45 / (s.frequency_Hz * Ts))));
-  const double omega = 2.0 * kPi * s.frequency_Hz;
-  const double t_ref = 0.5 * (t[start] + t[n - 1]);
-  const double half = std::max(0.5 * (t[n - 1] - t[start]), Ts);
-  Eigen::MatrixXd rhs(static_cast<Eigen::Index>(n - start), 2);
-  for (size_t k = start; k < n; ++k) {
-    rhs(static_cast<Eigen::Index>(k - start), 0) = u[k];
-    rhs(static_cast<Eigen::Index>(k - start), 1) = y[k];
-  }
-  const Eigen::MatrixXd X = harmonic_basis(t, start, n, t_ref, half, omega, H, true);
-  const Eigen::MatrixXd coef = X.householderQr().solve(rhs);
-  const std::complex<double> U1 = phasor(coef.col(0), 2, 0);
-  const std::complex<double> Y1 = phasor(coef.col(1), 2, 0);
-  P.response = Y1 / U1;
-  P.dc_um = coef(0, 1);
-  P.drift_um_per_s = coef(1, 1) / half;
-  for (int k = 0; k < H; ++k) P.harmonic_um.push_back(std::abs(phasor(coef.col(1), 2, k)));
-
-  // Per-period estimates: their spread is the uncertainty (noise, drift, hysteresis
-  // and anything else that is not a stationary response shows up there).
-  std::vector<std::complex<double>> per;
-  for (int p = 0; p < P.periods; ++p) {
-    const size_t b = start + static_cast<size_t>(std::llround(p * period_samples));
-    const size_t e = std::min(n, start + static_cast<size_t>(std::llround((p + 1) * period_samples)));
-    if (e <= b + 4) continue;
-    const Eigen::MatrixXd Xp = harmonic_basis(t, b, e, t_ref, half, omega, H, false);
-    const Eigen::MatrixXd cp = Xp.householderQr().solve(rhs.middleRows(static_cast<Eigen::Index>(b - start),
-                                                                        static_cast<Eigen::Index>(e - b)));
-    per.push_back(phasor(cp.col(1), 1, 0) / phasor(cp.col(0), 1, 0));
-  }
-  if (per.size() >= 2) {
-    std::complex<double> mean{0.0, 0.0};
-    for (auto h : per) mean += h;
-    mean /= static_cast<double>(per.size());
-    double ss = 0.0;
-    for (auto h : per) ss += std::norm(h - mean);
-    const double m = static_cast<double>(per.size());
-    P.response_sigma = std::sqrt(ss / (m - 1.0)) / std::sqrt(m);
-  }
+  fit_harmonics(P, t, u, y, start, Ts, o);
   if (!std::isfinite(std::abs(P.response))) return flag("no finite response (zero input amplitude?)");
   P.valid = true;
   return P;

@@ -99,9 +99,10 @@ std::string TransferFunctionFit::control_problem() const {
   return os.str();
 }
 
-TransferFunctionFit fit_transfer_function(const Eigen::VectorXd& omega, const Eigen::VectorXcd& H,
-                                          const TransferFunctionFitOptions& o) {
-  const int nb = o.numerator_order, na = o.denominator_order;
+namespace {
+
+/// Throws std::invalid_argument naming what is wrong with the orders or the points.
+void check_points(const Eigen::VectorXd& omega, const Eigen::VectorXcd& H, int nb, int na) {
   if (nb < 0 || na < 1 || nb > na) throw std::invalid_argument("need 0 <= numerator order <= denominator order, >= 1");
   const Eigen::Index K = omega.size();
   const int np = nb + 1 + na;
@@ -112,6 +113,75 @@ TransferFunctionFit fit_transfer_function(const Eigen::VectorXd& omega, const Ei
   for (Eigen::Index k = 0; k < K; ++k)
     if (!(omega(k) > 0.0) || !std::isfinite(H(k).real()) || !std::isfinite(H(k).imag()) || std::abs(H(k)) == 0.0)
       throw std::invalid_argument("frequency point " + std::to_string(k) + " is not finite, positive and non-zero");
+}
+
+/// One weighted linear least-squares problem N(s') - H D(s') = 0 in theta (D's leading 1 to the right side),
+/// each point weighted by `weight` / |D_prev|.
+Eigen::VectorXd linearised_solve(const Rational& R, const Eigen::VectorXcd& s, const Eigen::VectorXcd& H,
+                                 const Eigen::VectorXd& weight, const Eigen::VectorXd& Dw) {
+  const Eigen::Index K = s.size();
+  const int nb = R.nb, na = R.na;
+  Eigen::MatrixXd A(2 * K, nb + 1 + na);
+  Eigen::VectorXd b(2 * K);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    const double wk = weight(k) / Dw(k);
+    cd p = 1.0;
+    for (int i = 0; i <= std::max(nb, na); ++i) {
+      if (i <= nb) {
+        A(2 * k, i) = (wk * p).real();
+        A(2 * k + 1, i) = (wk * p).imag();
+      }
+      if (i < na) {
+        const cd v = -wk * H(k) * p;
+        A(2 * k, nb + 1 + i) = v.real();
+        A(2 * k + 1, nb + 1 + i) = v.imag();
+      }
+      if (i == na) {
+        const cd v = wk * H(k) * p;
+        b(2 * k) = v.real();
+        b(2 * k + 1) = v.imag();
+      }
+      p *= s(k);
+    }
+  }
+  return A.colPivHouseholderQr().solve(b);
+}
+
+/// Linear stage: Levy (first pass, D_prev = 1), then Sanathanan-Koerner reweighting by 1/|D_prev|.
+/// Counts its iterations in `out`.
+Eigen::VectorXd sanathanan_koerner(const Rational& R, const Eigen::VectorXcd& s, const Eigen::VectorXcd& H,
+                                   const Eigen::VectorXd& weight, int iterations, TransferFunctionFit& out) {
+  Eigen::VectorXd th = Eigen::VectorXd::Zero(R.nb + 1 + R.na);
+  th(R.nb + 1) = 1.0;  // D = s'^na + 1 to start; overwritten by the first solve
+  Eigen::VectorXd Dw = Eigen::VectorXd::Ones(s.size());
+  for (int it = 0; it < iterations; ++it) {
+    const Eigen::VectorXd next = linearised_solve(R, s, H, weight, Dw);
+    const double change = (next - th).norm() / std::max(next.norm(), 1e-300);
+    th = next;
+    out.sk_iterations = it + 1;
+    for (Eigen::Index k = 0; k < s.size(); ++k) Dw(k) = std::abs(R.den(th, s(k)));
+    if (change < 1e-12) break;
+  }
+  return th;
+}
+
+/// Back to s: num and den multiplied by w0^na so den is monic in s.
+TransferFunction unscaled(const Rational& R, const Eigen::VectorXd& th, double w0) {
+  const int nb = R.nb, na = R.na;
+  std::vector<double> num(static_cast<size_t>(nb + 1)), den(static_cast<size_t>(na + 1));
+  for (int i = 0; i <= nb; ++i) num[static_cast<size_t>(nb - i)] = th(i) * std::pow(w0, na - i);
+  den[0] = 1.0;
+  for (int i = 0; i < na; ++i) den[static_cast<size_t>(na - i)] = th(nb + 1 + i) * std::pow(w0, na - i);
+  return TransferFunction(num, den, "ident.G");
+}
+
+}  // namespace
+
+TransferFunctionFit fit_transfer_function(const Eigen::VectorXd& omega, const Eigen::VectorXcd& H,
+                                          const TransferFunctionFitOptions& o) {
+  const int nb = o.numerator_order, na = o.denominator_order;
+  check_points(omega, H, nb, na);
+  const Eigen::Index K = omega.size();
 
   // Scale s so the powers of s'^i stay near 1 (conditioning of both stages).
   const double w0 = std::exp(omega.array().log().mean());
@@ -120,42 +190,8 @@ TransferFunctionFit fit_transfer_function(const Eigen::VectorXd& omega, const Ei
   const Eigen::VectorXd weight = H.cwiseAbs().cwiseInverse();  // relative error
   const Rational R{nb, na};
 
-  // Linear stage: Levy (first pass, D_prev = 1), then Sanathanan-Koerner reweighting by 1/|D_prev|.
-  Eigen::VectorXd th = Eigen::VectorXd::Zero(np);
-  th(nb + 1) = 1.0;  // D = s'^na + 1 to start; overwritten by the first solve
-  Eigen::VectorXd Dw = Eigen::VectorXd::Ones(K);
   TransferFunctionFit out{TransferFunction({1.0}, {1.0}), 0, 0, 0, 0, {}, 0, {}, {}, false, false};
-  for (int it = 0; it < o.sk_iterations; ++it) {
-    Eigen::MatrixXd A(2 * K, np);
-    Eigen::VectorXd b(2 * K);
-    for (Eigen::Index k = 0; k < K; ++k) {
-      const double wk = weight(k) / Dw(k);
-      cd p = 1.0;
-      for (int i = 0; i <= std::max(nb, na); ++i) {
-        if (i <= nb) {
-          A(2 * k, i) = (wk * p).real();
-          A(2 * k + 1, i) = (wk * p).imag();
-        }
-        if (i < na) {
-          const cd v = -wk * H(k) * p;
-          A(2 * k, nb + 1 + i) = v.real();
-          A(2 * k + 1, nb + 1 + i) = v.imag();
-        }
-        if (i == na) {
-          const cd v = wk * H(k) * p;
-          b(2 * k) = v.real();
-          b(2 * k + 1) = v.imag();
-        }
-        p *= s(k);
-      }
-    }
-    const Eigen::VectorXd next = A.colPivHouseholderQr().solve(b);
-    const double change = (next - th).norm() / std::max(next.norm(), 1e-300);
-    th = next;
-    out.sk_iterations = it + 1;
-    for (Eigen::Index k = 0; k < K; ++k) Dw(k) = std::abs(R.den(th, s(k)));
-    if (change < 1e-12) break;
-  }
+  Eigen::VectorXd th = sanathanan_koerner(R, s, H, weight, o.sk_iterations, out);
   Eigen::VectorXcd G(K);
   for (Eigen::Index k = 0; k < K; ++k) G(k) = R.num(th, s(k)) / R.den(th, s(k));
   out.sk_fit_percent = fit_percent(H, G);
@@ -167,17 +203,11 @@ TransferFunctionFit fit_transfer_function(const Eigen::VectorXd& omega, const Ei
   lm.setXtol(1e-14);
   lm.setFtol(1e-14);
   Eigen::VectorXd th_lm = th;
-  const auto status = lm.minimize(th_lm);
-  out.lm_status = lm_status_text(status);
+  out.lm_status = lm_status_text(lm.minimize(th_lm));
   out.lm_iterations = static_cast<int>(lm.iterations());
   if (th_lm.allFinite()) th = th_lm;
 
-  // Back to s: multiply num and den by w0^na so den is monic in s.
-  std::vector<double> num(static_cast<size_t>(nb + 1)), den(static_cast<size_t>(na + 1));
-  for (int i = 0; i <= nb; ++i) num[static_cast<size_t>(nb - i)] = th(i) * std::pow(w0, na - i);
-  den[0] = 1.0;
-  for (int i = 0; i < na; ++i) den[static_cast<size_t>(na - i)] = th(nb + 1 + i) * std::pow(w0, na - i);
-  out.G = TransferFunction(num, den, "ident.G");
+  out.G = unscaled(R, th, w0);
   for (Eigen::Index k = 0; k < K; ++k) G(k) = out.G(cd(0.0, omega(k)));
   out.fit_percent = fit_percent(H, G);
   out.max_relative_error = ((G - H).cwiseAbs().array() / H.cwiseAbs().array()).maxCoeff();
