@@ -370,19 +370,27 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
     throw ConfigError(key, "asymmetric_dynamics and bias_dependent_dynamics both change G's time scale: give one");
 }
 
+namespace {
+
+/// The time scales G is discretised at: 1 alone, 1 and 1 + kappa (asymmetric dynamics), or 41 log-spaced over
+/// 1/4..4 with 1 exact at index 20 (bias-dependent dynamics, interpolated between neighbours).
+std::vector<double> time_scale_grid(EffectKind time_scaling, double relaxation_slowdown) {
+  if (time_scaling == EffectKind::asymmetric_dynamics) return {1.0, 1.0 + relaxation_slowdown};
+  if (time_scaling != EffectKind::bias_dependent_dynamics) return {1.0};
+  std::vector<double> grid;
+  for (int i = 0; i <= 40; ++i) grid.push_back(std::exp(std::log(4.0) * (i - 20) / 20.0));
+  grid[20] = 1.0;
+  return grid;
+}
+
+}  // namespace
+
 AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, double Ts, std::span<const Effect> effects)
     : f_(model.f), Ts_(Ts) {
   if (!(Ts > 0.0)) throw ConfigError("sample_time_s", "must be positive");
   if (!(io_delay >= 0.0 && io_delay <= 8.0)) throw ConfigError("model.io_delay_samples", "must be 0..8 samples");
   if (!model.G.is_stable()) throw ConfigError("model.G", "G(s) = " + model.G.to_string() + " is unstable");
-  validate_mixture(effects, "effect");
-  for (const auto& e : effects) {
-    if (e.kind == EffectKind::none) continue;
-    validate(e, Ts, "effect." + std::string(to_string(e.kind)));
-    on_[static_cast<size_t>(e.kind)] = true;
-    p_[static_cast<size_t>(e.kind)] = e.p;
-    if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
-  }
+  take_effects(effects);
   const double delay_samples = io_delay + (has(EffectKind::delay) ? p(EffectKind::delay)[0] / Ts : 0.0);
   delay_whole_ = static_cast<int>(delay_samples);
   delay_fraction_ = delay_samples - delay_whole_;
@@ -400,29 +408,41 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
                                                   has(EffectKind::resonance), p(EffectKind::resonance)),
                                      "model.G");
   if (ss.order() > kMaxOrder) throw ConfigError("model.G", "order above " + std::to_string(kMaxOrder));
-  if (time_scaling_ == EffectKind::asymmetric_dynamics) {
-    scale_grid_ = {1.0, 1.0 + p(EffectKind::asymmetric_dynamics)[0]};
-  } else if (time_scaling_ == EffectKind::bias_dependent_dynamics) {
-    for (int i = 0; i <= 40; ++i) scale_grid_.push_back(std::exp(std::log(4.0) * (i - 20) / 20.0));
-    scale_grid_[20] = 1.0;
-  } else {
-    scale_grid_ = {1.0};
-  }
-  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
+  scale_grid_ = time_scale_grid(time_scaling_, p(EffectKind::asymmetric_dynamics)[0]);
   const std::string slow_key = "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only";
   const auto slow = !slow_only ? SlowMode{}
                     : in_parts ? slow_mode_in_parts(g_own, model.G, ss.order(), slow_key)
                                : slow_mode(ss, model.G, slow_key);
+  discretise_grid(ss, slow_only, slow.dA, slow.dB);
+  linear_step_ = kLinearSteps[delay_fraction_ > 0.0 ? 1 : 0][static_cast<size_t>(ss.order())];
+  set_gains(model);
+  reset_steady_state(0.0);
+}
+
+void AugmentedPlant::take_effects(std::span<const Effect> effects) {
+  validate_mixture(effects, "effect");
+  for (const auto& e : effects) {
+    if (e.kind == EffectKind::none) continue;
+    validate(e, Ts_, "effect." + std::string(to_string(e.kind)));
+    on_[static_cast<size_t>(e.kind)] = true;
+    p_[static_cast<size_t>(e.kind)] = e.p;
+    if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
+  }
+}
+
+void AugmentedPlant::discretise_grid(const StateSpace& ss, bool slow_only, const Eigen::MatrixXd& slow_dA,
+                                     const Eigen::VectorXd& slow_dB) {
+  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
     if (slow_only) {
-      scaled.A += (1.0 / scale_grid_[g] - 1.0) * slow.dA;
-      scaled.B += (1.0 / scale_grid_[g] - 1.0) * slow.dB;
+      scaled.A += (1.0 / scale_grid_[g] - 1.0) * slow_dA;
+      scaled.B += (1.0 / scale_grid_[g] - 1.0) * slow_dB;
     } else {
       scaled.A /= scale_grid_[g];
       scaled.B /= scale_grid_[g];
     }
-    const auto d = discretize_zoh(scaled, Ts);
+    const auto d = discretize_zoh(scaled, Ts_);
     if (g == unit) {
       rest_lu_.compute(Matrix::Identity(d.A.rows(), d.A.cols()) - Matrix(d.A));
       rest_B_ = d.B;
@@ -430,7 +450,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     auto& ab = AB_grid_.emplace_back();
     auto& early = E_grid_.emplace_back();
     if (delay_fraction_ > 0.0) {
-      const Vector e = discretize_zoh(scaled, (1.0 - delay_fraction_) * Ts).A * discretize_zoh(scaled, delay_fraction_ * Ts).B;
+      const Vector e = discretize_zoh(scaled, (1.0 - delay_fraction_) * Ts_).A * discretize_zoh(scaled, delay_fraction_ * Ts_).B;
       for (Eigen::Index r = 0; r < e.size(); ++r) early[static_cast<size_t>(r)] = e(r);
     }
     const auto n = d.A.rows();
@@ -441,18 +461,19 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
     }
     D_ = d.D;
   }
-  linear_step_ = kLinearSteps[delay_fraction_ > 0.0 ? 1 : 0][static_cast<size_t>(ss.order())];
+}
+
+void AugmentedPlant::set_gains(const HammersteinModel& model) {
   dc_gain_ = model.G.dc_gain();
   const Vector rest_per_unit = rest_lu_.solve(rest_B_);
   block_dc_gain_ = D_;
   for (Eigen::Index i = 0; i < rest_per_unit.size(); ++i) block_dc_gain_ += C_[static_cast<size_t>(i)] * rest_per_unit(i);
   saturate_drive_ = has(EffectKind::saturation) && p(EffectKind::saturation)[2] != 0.0 && dc_gain_ != 0.0;
   const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
-  if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts / op_tau) : 1.0;
+  if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts_ / op_tau) : 1.0;
   const double reference_um = time_scaling_ == EffectKind::bias_dependent_dynamics ? p(EffectKind::bias_dependent_dynamics)[2] : 0.0;
   y_ref_ = reference_um > 0.0 ? reference_um : std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
   inverse_y_ref_ = 1.0 / y_ref_;
-  reset_steady_state(0.0);
 }
 
 double AugmentedPlant::time_scale(double w) const noexcept {

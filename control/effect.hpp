@@ -24,6 +24,8 @@
 
 namespace pvcgel::control {
 
+struct StateSpace;
+
 /// What the nominal model may be missing.
 enum class EffectKind : std::uint8_t {
   none,
@@ -347,6 +349,15 @@ class AugmentedPlant final {
   void advance(double u_V) noexcept;
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
+  // Construction's stages (configuration time: they throw ConfigError).
+  /// Validates the effects and records which run, with their parameters and the time-scaling one.
+  void take_effects(std::span<const Effect> effects);
+  /// [A | B], C, D and E per time scale of scale_grid_, and the rest state's factorisation at time scale 1;
+  /// slow_only: only G's slow mode (slow_dA, slow_dB) is scaled, else the whole block.
+  void discretise_grid(const StateSpace& ss, bool slow_only, const Eigen::MatrixXd& slow_dA,
+                       const Eigen::VectorXd& slow_dB);
+  /// G's and the block's DC gains, the drive-side saturation switch and bias-dependent dynamics' scales.
+  void set_gains(const HammersteinModel& model);
 
   [[nodiscard]] bool has(EffectKind k) const noexcept { return on_[static_cast<size_t>(k)]; }
   [[nodiscard]] const std::array<double, kMaxEffectParams>& p(EffectKind k) const noexcept {

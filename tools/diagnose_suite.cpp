@@ -36,6 +36,53 @@ std::string label_name(int i) {
 
 }  // namespace
 
+namespace {
+
+/// The case's first recording as caseNN.csv in `save_dir`, and its label line (kept apart from it).
+void save_case(const std::filesystem::path& save_dir, std::ofstream& labels, int number, EffectKind kind,
+               const GeneratedCase& c) {
+  char name[32];
+  std::snprintf(name, sizeof name, "case%02d.csv", number);
+  control::identification::SineRecord rec;
+  rec.sample_time_s = c.recordings[0].sample_time_s;
+  rec.t_s = c.recordings[0].t_s;
+  rec.u_V = c.recordings[0].u_V;
+  rec.y_um = c.recordings[0].y_um;
+  write_sine_recording(save_dir / name, rec, {{"source", "pvcgel bench diagnose (blind case; its label is in labels.csv)"}});
+  labels << name << ',' << to_string(kind) << ',' << c.truth.magnitude << ',' << c.truth.effect_rms_um << ','
+         << c.truth.effect_peak_um << ',' << c.truth.closed_loop << ",\"" << c.truth.input << "\"\n";
+}
+
+/// One case's line of the suite's log.
+std::string case_line(int number, const DiagnosisResult& d, EffectKind kind, const GeneratedCase& c, bool ok, double secs) {
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "%3d verdict %-24s truth %-24s %s  effect RMS %.3f um (peak %.2f um)%s  held-out RMSE %.4f -> %.4f um  "
+                "%.2f s  [%s%s]\n",
+                number, d.verdict.c_str(), std::string(to_string(kind)).c_str(), ok ? "ok   " : "WRONG",
+                c.truth.effect_rms_um, c.truth.effect_peak_um, c.truth.within_spec ? "" : " (out of spec)",
+                d.baseline.rmse_validation_um, d.fitted.rmse_validation_um, secs, c.truth.closed_loop ? "closed loop: " : "",
+                c.truth.input.c_str());
+  return line;
+}
+
+/// Counts the case in `r`: confusion, accuracy, false alarms; returns whether it is right.
+bool tally(BlindSuiteResult& r, EffectKind kind, const DiagnosisResult& d, const GeneratedCase& c) {
+  const int truth = static_cast<int>(c.truth.effect), verdict = label_index(d.verdict);
+  ++r.confusion[static_cast<size_t>(truth)][static_cast<size_t>(verdict)];
+  ++r.cases;
+  const bool ok = truth == verdict;
+  r.correct += ok;
+  if (kind == EffectKind::none) {
+    ++r.none_cases;
+    r.false_alarms += !ok;
+  }
+  r.out_of_spec += !c.truth.within_spec;
+  return ok;
+}
+
+}  // namespace
+
 BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& log, const GeneratorOptions& options,
                                  const std::string& save_dir) {
   namespace fs = std::filesystem;
@@ -52,50 +99,21 @@ BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& lo
   int ratio_n = 0;
   for (const auto& [kind, case_seed] : blind_suite_plan(cases, seed)) {
     const GeneratedCase c = generate_case(model, kind, case_seed, options);
-    if (labels.is_open()) {
-      char name[32];
-      std::snprintf(name, sizeof name, "case%02d.csv", r.cases + 1);
-      control::identification::SineRecord rec;
-      rec.sample_time_s = c.recordings[0].sample_time_s;
-      rec.t_s = c.recordings[0].t_s;
-      rec.u_V = c.recordings[0].u_V;
-      rec.y_um = c.recordings[0].y_um;
-      write_sine_recording(fs::path(save_dir) / name, rec, {{"source", "pvcgel bench diagnose (blind case; its label is in labels.csv)"}});
-      labels << name << ',' << to_string(kind) << ',' << c.truth.magnitude << ',' << c.truth.effect_rms_um << ','
-             << c.truth.effect_peak_um << ',' << c.truth.closed_loop << ",\"" << c.truth.input << "\"\n";
-    }
+    if (labels.is_open()) save_case(save_dir, labels, r.cases + 1, kind, c);
     // The diagnosis sees the recordings and the model only.
     const auto t0 = std::chrono::steady_clock::now();
     const DiagnosisResult d = diagnose(model, c.recordings);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const int truth = static_cast<int>(c.truth.effect), verdict = label_index(d.verdict);
-    ++r.confusion[static_cast<size_t>(truth)][static_cast<size_t>(verdict)];
-    ++r.cases;
-    const bool ok = truth == verdict;
-    r.correct += ok;
-    if (kind == EffectKind::none) {
-      ++r.none_cases;
-      r.false_alarms += !ok;
-    }
-    r.out_of_spec += !c.truth.within_spec;
-    double ratio = NAN;
+    const bool ok = tally(r, kind, d, c);
     if (ok && kind != EffectKind::none) {
-      ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
+      const double ratio = d.fitted.rmse_validation_um / d.baseline.rmse_validation_um;
       r.worst_ratio = std::max(r.worst_ratio, ratio);
       ratio_sum += ratio;
       ++ratio_n;
     }
     r.max_case_s = std::max(r.max_case_s, secs);
     time_sum += secs;
-    char line[512];
-    std::snprintf(line, sizeof line,
-                  "%3d verdict %-24s truth %-24s %s  effect RMS %.3f um (peak %.2f um)%s  held-out RMSE %.4f -> %.4f um  "
-                  "%.2f s  [%s%s]\n",
-                  r.cases, d.verdict.c_str(), std::string(to_string(kind)).c_str(), ok ? "ok   " : "WRONG",
-                  c.truth.effect_rms_um, c.truth.effect_peak_um, c.truth.within_spec ? "" : " (out of spec)",
-                  d.baseline.rmse_validation_um, d.fitted.rmse_validation_um, secs, c.truth.closed_loop ? "closed loop: " : "",
-                  c.truth.input.c_str());
-    log << line << std::flush;
+    log << case_line(r.cases, d, kind, c, ok, secs) << std::flush;
   }
   r.mean_ratio = ratio_n ? ratio_sum / ratio_n : NAN;
   r.mean_case_s = r.cases ? time_sum / r.cases : 0.0;
