@@ -23,6 +23,7 @@ using namespace pvcgel::daemon;
 namespace {
 
 constexpr int kExitOk = 0, kExitError = 1, kExitConfig = 2, kExitFault = 3;
+constexpr int kExitUsage = 64;  ///< the command line itself is wrong (sysexits EX_USAGE), as pvcgel's
 
 std::string iso_time_now() {
   char buf[32];
@@ -184,7 +185,12 @@ int main(int argc, char** argv) {
                  "record every cycle to this CSV file (missing parent directories are created, and said so)");
   app.add_option("--inject-fault", opt.inject, "sim backend only: KIND@SECONDS, e.g. sensor_nan@3");
   app.add_flag("--check-config", opt.check_only, "validate the configuration and exit");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help is an "error" with code 0; everything else is a usage error.
+    return app.exit(e) == 0 ? kExitOk : kExitUsage;
+  }
   try {
     return run(opt);
   } catch (const control::ConfigError& e) {

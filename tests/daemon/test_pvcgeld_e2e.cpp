@@ -233,6 +233,12 @@ TEST(PvcgelExitCodes, TheSameMistakeGivesTheSameCodeInEverySubcommand) {
   }
   const auto daemon = run_program(kDaemon, {"--config", bad_toml, "--check-config"});
   EXPECT_EQ(daemon.exit_code, 2) << daemon.err;
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--no-such-option"}, std::vector<std::string>{"--duration", "-1"}}) {
+    const auto r = run_program(kDaemon, args);
+    EXPECT_EQ(r.exit_code, 64) << args[0] << ": " << r.err;
+  }
+  EXPECT_EQ(run_program(kDaemon, {"--help"}).exit_code, 0);
   for (const std::vector<std::string>& args : {std::vector<std::string>{"ident", "--no-such-option"},
                                                std::vector<std::string>{"show"}, std::vector<std::string>{}}) {
     const auto r = run_program(kClient, args);
