@@ -31,7 +31,7 @@ int label_index(const std::string& verdict) {
 }
 
 std::string label_name(int i) {
-  return i == BlindSuiteResult::kLabels - 1 ? "unexplained" : std::string(to_string(static_cast<EffectKind>(i)));
+  return i == BlindSuiteResult::kLabels - 1 ? "unexplained" : std::string(kEffectKindNames.names()[static_cast<size_t>(i)]);
 }
 
 }  // namespace
