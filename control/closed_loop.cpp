@@ -1,9 +1,48 @@
 #include "control/closed_loop.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
 namespace pvcgel::control {
+
+namespace {
+
+/// The tracking errors' sums over the samples after settling; finish() turns them into means.
+struct ErrorSums {
+  double abs = 0.0, sq = 0.0, abs_true = 0.0, noise = 0.0;
+  long count = 0;
+
+  void add(TrackingErrors& e, double r, double y, double y_true, bool saturated) {
+    const double err = r - y;
+    abs += std::abs(err);
+    sq += err * err;
+    e.max_abs_um = std::max(e.max_abs_um, std::abs(err));
+    abs_true += std::abs(r - y_true);
+    noise += std::abs(y - y_true);
+    if (saturated) ++e.saturated_samples;
+    ++count;
+  }
+  void finish(TrackingErrors& e) const {
+    if (count == 0) return;
+    const auto n_eval = static_cast<double>(count);
+    e.mean_abs_um = abs / n_eval;
+    e.rms_um = std::sqrt(sq / n_eval);
+    e.mean_abs_true_um = abs_true / n_eval;
+    e.noise_mean_abs_um = noise / n_eval;
+  }
+};
+
+void append(ClosedLoopTrace& trace, double t, double r, double y, double y_true, const ControlOutput& out) {
+  trace.t_s.push_back(t);
+  trace.r_um.push_back(r);
+  trace.y_um.push_back(y);
+  trace.y_true_um.push_back(y_true);
+  trace.u_V.push_back(out.voltage_V);
+  trace.d_hat.push_back(out.d_hat);
+}
+
+}  // namespace
 
 ClosedLoopRun run_closed_loop(SimulatedRig& rig, Controller& ctl, const MultiSine& ref, double duration_s,
                               double settle_s, bool keep_trace) {
@@ -23,43 +62,19 @@ ClosedLoopRun run_closed_loop(SimulatedRig& rig, Controller& ctl, const MultiSin
                     &run.trace.d_hat})
       v->reserve(static_cast<size_t>(n));
   }
-  auto& e = run.errors;
-  double sum_abs = 0.0, sum_sq = 0.0, sum_abs_true = 0.0, sum_noise = 0.0;
-  long count = 0;
+  ErrorSums sums;
   for (long k = 0; k < n; ++k) {
     const double t = static_cast<double>(k) * Ts;
     const double y_true = rig.true_displacement_um();
     const double y = rig.measure();
     const auto out = ctl.step(std::span<const double>(window.data(), static_cast<size_t>(len)), y);
     rig.apply(out.voltage_V);
-    if (t >= settle_s) {
-      const double err = window[0] - y;
-      sum_abs += std::abs(err);
-      sum_sq += err * err;
-      e.max_abs_um = std::max(e.max_abs_um, std::abs(err));
-      sum_abs_true += std::abs(window[0] - y_true);
-      sum_noise += std::abs(y - y_true);
-      if (out.status == ControlOutput::Status::saturated) ++e.saturated_samples;
-      ++count;
-    }
-    if (keep_trace) {
-      run.trace.t_s.push_back(t);
-      run.trace.r_um.push_back(window[0]);
-      run.trace.y_um.push_back(y);
-      run.trace.y_true_um.push_back(y_true);
-      run.trace.u_V.push_back(out.voltage_V);
-      run.trace.d_hat.push_back(out.d_hat);
-    }
+    if (t >= settle_s) sums.add(run.errors, window[0], y, y_true, out.status == ControlOutput::Status::saturated);
+    if (keep_trace) append(run.trace, t, window[0], y, y_true, out);
     for (int i = 0; i + 1 < len; ++i) window[static_cast<size_t>(i)] = window[static_cast<size_t>(i + 1)];
     window[static_cast<size_t>(len - 1)] = ref(static_cast<double>(k + len) * Ts);
   }
-  if (count > 0) {
-    const auto n_eval = static_cast<double>(count);
-    e.mean_abs_um = sum_abs / n_eval;
-    e.rms_um = std::sqrt(sum_sq / n_eval);
-    e.mean_abs_true_um = sum_abs_true / n_eval;
-    e.noise_mean_abs_um = sum_noise / n_eval;
-  }
+  sums.finish(run.errors);
   return run;
 }
 

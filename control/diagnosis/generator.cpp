@@ -407,6 +407,48 @@ double magnitude_cap(EffectKind kind) {
   return 0.0;
 }
 
+/// A run at the magnitude found for the target, with its effect's RMS and peak (0 for `none`).
+struct SizedRun {
+  Run run;
+  double rms = 0.0, peak = 0.0;
+};
+
+/// Whole samples: the smallest delay that reaches 0.85 of the target RMS (sets e.m).
+SizedRun size_delay(const HammersteinModel& model, const GeneratorOptions& o, TruthEffect& e, const Excitation& ex,
+                    std::uint64_t seed, double target) {
+  SizedRun s;
+  for (int d = 1; d <= static_cast<int>(magnitude_cap(EffectKind::delay)); ++d) {
+    e.m = d;
+    s.run = run_case(model, o, e, ex, seed);
+    std::tie(s.rms, s.peak) = effect_size(model, o, s.run);
+    if (s.rms >= 0.85 * target) break;
+  }
+  return s;
+}
+
+/// Secant on log(magnitude) toward the target RMS, within the kind's floor and cap (sets e.m).
+SizedRun size_by_secant(const HammersteinModel& model, const GeneratorOptions& o, EffectKind kind, TruthEffect& e,
+                        const Excitation& ex, std::uint64_t seed, double target) {
+  SizedRun s;
+  const double sign = e.m < 0 ? -1.0 : 1.0;
+  double lm = std::log(std::abs(e.m)), lr_prev = 0.0, lm_prev = 0.0;
+  for (int it = 0; it < 10; ++it) {
+    e.m = sign * std::clamp(std::exp(lm), magnitude_floor(kind), magnitude_cap(kind));
+    s.run = run_case(model, o, e, ex, seed);
+    std::tie(s.rms, s.peak) = effect_size(model, o, s.run);
+    const double lr = std::log(std::max(s.rms, 1e-12));
+    if (std::abs(lr - std::log(target)) < 0.08 || (std::abs(e.m) >= magnitude_cap(kind) && s.rms < target) ||
+        (std::abs(e.m) <= magnitude_floor(kind) && s.rms > target))
+      break;
+    double slope = 1.0;
+    if (it > 0 && std::abs(lm - lm_prev) > 1e-9) slope = std::clamp((lr - lr_prev) / (lm - lm_prev), 0.2, 5.0);
+    lm_prev = lm;
+    lr_prev = lr;
+    lm += std::clamp((std::log(target) - lr) / slope, -3.0, 3.0);
+  }
+  return s;
+}
+
 }  // namespace
 
 GeneratedCase generate_case(const HammersteinModel& model, EffectKind kind, std::uint64_t seed,
@@ -426,38 +468,11 @@ GeneratedCase generate_case(const HammersteinModel& model, EffectKind kind, std:
     const Excitation ex =
         draw_excitation(rng, o, kind == EffectKind::dead_zone && attempt >= 2, kind == EffectKind::hysteresis);
     TruthEffect e = draw_shape(kind, rng, o.duration_s);
-    Run run;
-    double rms = 0.0, peak = 0.0;
-    if (kind == EffectKind::none) {
-      run = run_case(model, o, e, ex, seed);
-    } else if (kind == EffectKind::delay) {
-      // Whole samples: the smallest delay that reaches the target.
-      for (int d = 1; d <= static_cast<int>(magnitude_cap(kind)); ++d) {
-        e.m = d;
-        run = run_case(model, o, e, ex, seed);
-        std::tie(rms, peak) = effect_size(model, o, run);
-        if (rms >= 0.85 * target) break;
-      }
-    } else {
-      // Secant on log(magnitude) toward the target RMS.
-      const double sign = e.m < 0 ? -1.0 : 1.0;
-      double lm = std::log(std::abs(e.m)), lr_prev = 0.0, lm_prev = 0.0;
-      for (int it = 0; it < 10; ++it) {
-        e.m = sign * std::clamp(std::exp(lm), magnitude_floor(kind), magnitude_cap(kind));
-        run = run_case(model, o, e, ex, seed);
-        std::tie(rms, peak) = effect_size(model, o, run);
-        const double lr = std::log(std::max(rms, 1e-12));
-        if (std::abs(lr - std::log(target)) < 0.08 || (std::abs(e.m) >= magnitude_cap(kind) && rms < target) ||
-            (std::abs(e.m) <= magnitude_floor(kind) && rms > target))
-          break;
-        double slope = 1.0;
-        if (it > 0 && std::abs(lm - lm_prev) > 1e-9) slope = std::clamp((lr - lr_prev) / (lm - lm_prev), 0.2, 5.0);
-        lm_prev = lm;
-        lr_prev = lr;
-        lm += std::clamp((std::log(target) - lr) / slope, -3.0, 3.0);
-      }
-    }
-    out.recordings = {run.series};
+    const SizedRun sized = kind == EffectKind::none    ? SizedRun{run_case(model, o, e, ex, seed)}
+                           : kind == EffectKind::delay ? size_delay(model, o, e, ex, seed, target)
+                                                       : size_by_secant(model, o, kind, e, ex, seed, target);
+    const double rms = sized.rms, peak = sized.peak;
+    out.recordings = {sized.run.series};
     out.truth.magnitude = e.m;
     out.truth.effect_rms_um = rms;
     out.truth.effect_peak_um = peak;
