@@ -54,6 +54,12 @@ class EnumTable {
   }
   /// All names, in enumerator order (for messages listing the choices).
   [[nodiscard]] constexpr const std::array<std::string_view, N>& names() const noexcept { return names_; }
+  /// All enumerators, in order (to visit each without casting an integer to the enum).
+  [[nodiscard]] constexpr std::array<E, N> enumerators() const noexcept {
+    std::array<E, N> all{};
+    for (std::size_t i = 0; i < N; ++i) all[i] = at(i);
+    return all;
+  }
   /// The smallest enumerator and the number of enumerators.
   [[nodiscard]] constexpr E first() const noexcept { return first_; }
   [[nodiscard]] static constexpr std::size_t size() noexcept { return N; }

@@ -489,10 +489,8 @@ GeneratedCase generate_case(const HammersteinModel& model, EffectKind kind, std:
 
 std::vector<std::pair<EffectKind, std::uint64_t>> blind_suite_plan(int cases, std::uint64_t seed) {
   std::vector<EffectKind> labels;
-  // none and the ten effects in turn, through the name table (no cast makes an enumerator).
-  const auto kinds = kEffectKindNames.size();
-  for (int i = 0; i < cases; ++i)
-    labels.push_back(*kEffectKindNames.parse(kEffectKindNames.names()[static_cast<size_t>(i) % kinds]));
+  const auto kinds = kEffectKindNames.enumerators();  // none and the ten effects in turn
+  for (int i = 0; i < cases; ++i) labels.push_back(kinds[static_cast<size_t>(i) % kinds.size()]);
   std::mt19937_64 rng(seed);
   std::shuffle(labels.begin(), labels.end(), rng);
   std::vector<std::pair<EffectKind, std::uint64_t>> plan;

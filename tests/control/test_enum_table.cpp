@@ -16,6 +16,7 @@ static_assert(kGearNames.to_string(Gear::second) == "second");
 static_assert(pvcgel::from_wire<Gear>(3) == Gear::third);
 static_assert(!pvcgel::from_wire<Gear>(0).has_value());
 static_assert(pvcgel::parse_enum<Gear>("first") == Gear::first);
+static_assert(kGearNames.enumerators() == std::array{Gear::first, Gear::second, Gear::third});
 
 }  // namespace
 
