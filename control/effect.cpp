@@ -50,8 +50,11 @@ bool slowest_pole_is_real(const TransferFunction& G) {
 
 namespace {
 
-/// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40: ten per octave.
+/// Bias-dependent dynamics discretise G on a log grid of time scales 4^(i/20 - 1), i = 0..40: ten per octave,
+/// time scale 1 exactly at index kGridUnitIndex.
 constexpr double kGridStepsPerOctave = 10.0;
+constexpr size_t kGridUnitIndex = 20;
+constexpr size_t kGridLastIndex = 2 * kGridUnitIndex;
 
 /// log2(1 + j / 1024) for j = 0..1023, and the step to the next (log2(1 + (j + 1) / 1024) - log2(1 + j / 1024)).
 constexpr int kLog2TableBits = 10;
@@ -378,8 +381,9 @@ std::vector<double> time_scale_grid(EffectKind time_scaling, double relaxation_s
   if (time_scaling == EffectKind::asymmetric_dynamics) return {1.0, 1.0 + relaxation_slowdown};
   if (time_scaling != EffectKind::bias_dependent_dynamics) return {1.0};
   std::vector<double> grid;
-  for (int i = 0; i <= 40; ++i) grid.push_back(std::exp(std::log(4.0) * (i - 20) / 20.0));
-  grid[20] = 1.0;
+  for (size_t i = 0; i <= kGridLastIndex; ++i)
+    grid.push_back(std::exp(std::log(4.0) * (static_cast<double>(i) - kGridUnitIndex) / (2.0 * kGridStepsPerOctave)));
+  grid[kGridUnitIndex] = 1.0;
   return grid;
 }
 
@@ -432,7 +436,7 @@ void AugmentedPlant::take_effects(std::span<const Effect> effects) {
 
 void AugmentedPlant::discretise_grid(const StateSpace& ss, bool slow_only, const Eigen::MatrixXd& slow_dA,
                                      const Eigen::VectorXd& slow_dB) {
-  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? 20 : 0;  // the grid's time scale 1
+  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? kGridUnitIndex : 0;  // time scale 1
   for (size_t g = 0; g < scale_grid_.size(); ++g) {
     StateSpace scaled = ss;
     if (slow_only) {
@@ -556,7 +560,8 @@ void AugmentedPlant::apply(double u) noexcept { advance(u); }
     y_lin_ = (this->*linear_step_)(static_cast<size_t>(time_scale(w)), 1.0, w, dw);
   } else {
     // Interpolate between the two neighbouring discretisations (log-spaced grid).
-    const double pos = std::clamp(20.0 + table_log2(time_scale(w)) * kGridStepsPerOctave, 0.0, 39.999);
+    constexpr double kLastInterval = static_cast<double>(kGridLastIndex) - 1e-3;  // pos + 1 stays on the grid
+    const double pos = std::clamp(static_cast<double>(kGridUnitIndex) + table_log2(time_scale(w)) * kGridStepsPerOctave, 0.0, kLastInterval);
     y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
   }
   if (time_scaling_ == EffectKind::bias_dependent_dynamics) {  // only its time scale reads them

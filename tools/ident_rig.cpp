@@ -44,10 +44,10 @@ void leave_safe(DdsClient& c) {
     c.command(CommandKind::set_target, to_wire(daemon::LoopTarget::displacement), false);
 }
 
-/// One sine experiment: the segment is sent, and the telemetry of the cycles it
-/// drives is collected for the experiment's whole duration.
-SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
-  std::vector<double> v{p.bias_V, p.amplitude_V, p.frequency_Hz, 0.0};
+/// The sine segment of one experiment, in voltage, replacing what is queued. `v` holds its values and must
+/// outlive the message.
+pvcgel_v1_Trajectory sine_trajectory(const SinePoint& p, std::vector<double>& v) {
+  v = {p.bias_V, p.amplitude_V, p.frequency_Hz, 0.0};
   pvcgel_v1_Trajectory t{};
   t.target = to_wire(daemon::LoopTarget::voltage);
   t.kind = to_wire(daemon::SetpointSegment::Kind::sine);
@@ -57,6 +57,42 @@ SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
   t.blend_s = std::min(1.0, 0.5 * p.settle_s);
   t.values._buffer = v.data();
   t.values._length = t.values._maximum = 4;
+  return t;
+}
+
+/// Appends one telemetry sample of the experiment to `r`; throws when the rig left RUNNING or a cycle was lost.
+void append_sample(SineRecord& r, const pvcgel_v1_Telemetry& s, double& t0, std::uint64_t& last_seq) {
+  const auto state = dds::checked_from_wire<LoopState>(s.state, "Telemetry.state");
+  if (state != LoopState::running) {
+    const auto fault = dds::checked_from_wire<daemon::FaultReason>(s.fault, "Telemetry.fault");
+    throw std::runtime_error("the rig left RUNNING (" + std::string(daemon::to_string(state)) +
+                             (fault != daemon::FaultReason::none ? ", fault " + std::string(daemon::to_string(fault)) : "") +
+                             ")");
+  }
+  if (std::isnan(t0)) t0 = s.t_s;
+  else if (s.seq != last_seq + 1)
+    throw std::runtime_error("telemetry lost " + std::to_string(s.seq - last_seq - 1) + " cycles (sequence gap)");
+  last_seq = s.seq;
+  r.t_s.push_back(s.t_s - t0);
+  r.u_V.push_back(s.u_V);
+  r.y_um.push_back(s.y_um);
+}
+
+/// Throws when the rig refused the segment published as `seq`.
+void throw_if_refused(DdsClient& c, std::uint64_t seq) {
+  for (const auto& reply : c.take_replies())
+    if (reply.seq == seq && !reply.accepted)
+      throw std::runtime_error(
+          "the rig refused the sine: " +
+          std::string(daemon::to_string(dds::checked_from_wire<daemon::RejectReason>(reply.reason, "CommandReply.reason"))) +
+          ": " + reply.detail);
+}
+
+/// One sine experiment: the segment is sent, and the telemetry of the cycles it
+/// drives is collected for the experiment's whole duration.
+SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
+  std::vector<double> values;
+  pvcgel_v1_Trajectory t = sine_trajectory(p, values);
   c.take_telemetry(1 << 16);  // drop what came before
   const auto seq = c.publish_trajectory(t);
   SineRecord r;
@@ -70,28 +106,9 @@ SineRecord run_point(DdsClient& c, const SinePoint& p, double Ts) {
     bool any = false;
     for (const auto& s : c.take_telemetry(1 << 16)) {
       any = true;
-      if (s.chunk_seq != seq || r.t_s.size() >= rows) continue;
-      const auto state = dds::checked_from_wire<LoopState>(s.state, "Telemetry.state");
-      if (state != LoopState::running) {
-        const auto fault = dds::checked_from_wire<daemon::FaultReason>(s.fault, "Telemetry.fault");
-        throw std::runtime_error("the rig left RUNNING (" + std::string(daemon::to_string(state)) +
-                                 (fault != daemon::FaultReason::none ? ", fault " + std::string(daemon::to_string(fault)) : "") +
-                                 ")");
-      }
-      if (std::isnan(t0)) t0 = s.t_s;
-      else if (s.seq != last_seq + 1)
-        throw std::runtime_error("telemetry lost " + std::to_string(s.seq - last_seq - 1) + " cycles (sequence gap)");
-      last_seq = s.seq;
-      r.t_s.push_back(s.t_s - t0);
-      r.u_V.push_back(s.u_V);
-      r.y_um.push_back(s.y_um);
+      if (s.chunk_seq == seq && r.t_s.size() < rows) append_sample(r, s, t0, last_seq);
     }
-    for (const auto& reply : c.take_replies())
-      if (reply.seq == seq && !reply.accepted)
-        throw std::runtime_error(
-            "the rig refused the sine: " +
-            std::string(daemon::to_string(dds::checked_from_wire<daemon::RejectReason>(reply.reason, "CommandReply.reason"))) +
-            ": " + reply.detail);
+    throw_if_refused(c, seq);
     if (!any) {
       if (std::chrono::steady_clock::now() - last_progress > std::chrono::seconds(5))
         throw std::runtime_error("no telemetry for 5 s (daemon gone?)");

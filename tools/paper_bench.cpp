@@ -48,15 +48,11 @@ bool paper_ranking_holds(const ReferenceResult& r) {
          mean(ControllerMode::inverse_pid) < mean(ControllerMode::pid);
 }
 
-std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) {
-  std::ostringstream os;
+namespace {
+
+/// Table III beside ours: each reference's mean and max |e| per mode, the paper's next to it.
+void write_table_iii(std::ostream& os, const PaperBenchResult& r) {
   char buf[256];
-  std::snprintf(buf, sizeof buf,
-                "Simulated rig (default: the paper rig, truth n=3, model n=2), every mode's PID tuned to crossover %.0f rad/s, phase "
-                "margin %.0f deg on the plant it sees;\nerrors |r - y_measured| over %.0f..%.0f s. "
-                "Sensor-noise floor (mean |noise|): %.3f um.\n\n",
-                o.tuning.crossover_rad_s, o.tuning.phase_margin_deg, o.settle_s, o.duration_s, r.noise_floor_um);
-  os << buf;
   os << "                     |        PID        |    inverse/PID    |  inverse/PID/DOB  | inv/PID/DOB/FF (ours)\n";
   os << "reference            |   ours    paper   |   ours    paper   |   ours    paper   |   ours   vs PID\n";
   os << "---------------------+-------------------+-------------------+-------------------+------------------\n";
@@ -75,6 +71,11 @@ std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) 
       os << buf;
     }
   }
+}
+
+/// Each mode's reduction of mean |e| against PID, ours and the paper's, and the two checks the bench makes.
+void write_reductions(std::ostream& os, const PaperBenchResult& r) {
+  char buf[256];
   os << "\nReduction of mean |e| versus PID (ours / paper):\n";
   for (size_t i = 0; i < r.references.size(); ++i) {
     const auto& rr = r.references[i];
@@ -90,6 +91,11 @@ std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) 
                   rr.modes[3].errors.mean_abs_um <= 2.0 * r.noise_floor_um ? "yes" : "NO");
     os << buf;
   }
+}
+
+/// The error without sensor noise on this rig beside that on a rig equal to the model (bandwidth alone).
+void write_error_sources(std::ostream& os, const PaperBenchResult& r) {
+  char buf[256];
   os << "\nWhere the error comes from, mean |r - y_true| in um (no sensor noise): on this rig / on a rig that\n"
         "equals the model (finite loop bandwidth alone). Where the two are close, the mode is limited by its\n"
         "bandwidth, not by model mismatch, and a disturbance observer cannot help:\n";
@@ -103,6 +109,22 @@ std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) 
     }
     os << "\n";
   }
+}
+
+}  // namespace
+
+std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) {
+  std::ostringstream os;
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "Simulated rig (default: the paper rig, truth n=3, model n=2), every mode's PID tuned to crossover %.0f rad/s, phase "
+                "margin %.0f deg on the plant it sees;\nerrors |r - y_measured| over %.0f..%.0f s. "
+                "Sensor-noise floor (mean |noise|): %.3f um.\n\n",
+                o.tuning.crossover_rad_s, o.tuning.phase_margin_deg, o.settle_s, o.duration_s, r.noise_floor_um);
+  os << buf;
+  write_table_iii(os, r);
+  write_reductions(os, r);
+  write_error_sources(os, r);
   return os.str();
 }
 
