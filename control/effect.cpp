@@ -235,7 +235,7 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
               {"spread_decades", 0.0, 3.0, false, {0.0}, 0.0}};
     case EffectKind::dead_zone:
       return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
-              {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1})}};
+              {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1, 0.3})}};
     case EffectKind::saturation: {
       const bool bipolar = d.bipolar_stroke();
       const double near = bipolar ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
