@@ -530,6 +530,22 @@ TEST(DiagnoseIndependentCases, ADeadZoneTheCommandsNeverComeNearIsNotNamedInPlac
   EXPECT_NE(dead_zone->explanation.find("; not named: its threshold"), std::string::npos) << dead_zone->explanation;
 }
 
+TEST(DiagnoseIndependentCases, ASmoothDeadZoneBendingOneStepLevelIsADeadZone) {
+  // A fresh case of the independent generator (tests/data/dead_zone_wide_catch_up/README.md): a smooth
+  // 1.35 V dead zone on a 0-10 V input, seen at one step level (2.6 V) above every catch-up the grid
+  // started from; the dead-zone fit stopped at no dead zone and the verdict was drift.
+  const auto o = diagnose_data("dead_zone_wide_catch_up", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "dead_zone") << o.summary;
+  ASSERT_EQ(r.mixture.size(), 1u) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::dead_zone) << o.summary;
+  // The curve rejoins the nominal above 2.6 V and below 4.1 V: threshold plus catch-up between them.
+  const double rejoins_V = r.mixture[0].p[0] + r.mixture[0].p[1];
+  EXPECT_GT(rejoins_V, 2.6) << o.summary;
+  EXPECT_LT(rejoins_V, 4.1) << o.summary;
+  EXPECT_LE(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
