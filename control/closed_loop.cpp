@@ -8,22 +8,25 @@ namespace pvcgel::control {
 
 namespace {
 
-/// The tracking errors' sums over the samples after settling; finish() turns them into means.
+/// The tracking errors' sums, maximum and saturated count over the samples after settling; finish() writes
+/// them, the sums as means.
 struct ErrorSums {
-  double abs = 0.0, sq = 0.0, abs_true = 0.0, noise = 0.0;
-  long count = 0;
+  double abs = 0.0, sq = 0.0, abs_true = 0.0, noise = 0.0, max_abs = 0.0;
+  long count = 0, saturated = 0;
 
-  void add(TrackingErrors& e, double r, double y, double y_true, bool saturated) {
+  void add(double r, double y, double y_true, bool is_saturated) {
     const double err = r - y;
     abs += std::abs(err);
     sq += err * err;
-    e.max_abs_um = std::max(e.max_abs_um, std::abs(err));
+    max_abs = std::max(max_abs, std::abs(err));
     abs_true += std::abs(r - y_true);
     noise += std::abs(y - y_true);
-    if (saturated) ++e.saturated_samples;
+    if (is_saturated) ++saturated;
     ++count;
   }
   void finish(TrackingErrors& e) const {
+    e.max_abs_um = max_abs;
+    e.saturated_samples = saturated;
     if (count == 0) return;
     const auto n_eval = static_cast<double>(count);
     e.mean_abs_um = abs / n_eval;
@@ -69,7 +72,7 @@ ClosedLoopRun run_closed_loop(SimulatedRig& rig, Controller& ctl, const MultiSin
     const double y = rig.measure();
     const auto out = ctl.step(std::span<const double>(window.data(), static_cast<size_t>(len)), y);
     rig.apply(out.voltage_V);
-    if (t >= settle_s) sums.add(run.errors, window[0], y, y_true, out.status == ControlOutput::Status::saturated);
+    if (t >= settle_s) sums.add(window[0], y, y_true, out.status == ControlOutput::Status::saturated);
     if (keep_trace) append(run.trace, t, window[0], y, y_true, out);
     for (int i = 0; i + 1 < len; ++i) window[static_cast<size_t>(i)] = window[static_cast<size_t>(i + 1)];
     window[static_cast<size_t>(len - 1)] = ref(static_cast<double>(k + len) * Ts);
