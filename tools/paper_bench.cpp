@@ -1,7 +1,8 @@
 #include "tools/paper_bench.hpp"
 
+#include "control/text_format.hpp"
+
 #include <chrono>
-#include <cstdio>
 #include <sstream>
 
 namespace pvcgel::tools {
@@ -52,7 +53,6 @@ namespace {
 
 /// Table III beside ours: each reference's mean and max |e| per mode, the paper's next to it.
 void write_table_iii(std::ostream& os, const PaperBenchResult& r) {
-  char buf[256];
   os << "                     |        PID        |    inverse/PID    |  inverse/PID/DOB  | inv/PID/DOB/FF (ours)\n";
   os << "reference            |   ours    paper   |   ours    paper   |   ours    paper   |   ours   vs PID\n";
   os << "---------------------+-------------------+-------------------+-------------------+------------------\n";
@@ -65,47 +65,40 @@ void write_table_iii(std::ostream& os, const PaperBenchResult& r) {
         return stat == 0 ? e.mean_abs_um : e.max_abs_um;
       };
       const auto& pp = stat == 0 ? paper.mean_um : paper.max_um;
-      std::snprintf(buf, sizeof buf, "%-6s (%s)         | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f  %+5.0f%%\n",
-                    rr.name.c_str(), stat == 0 ? "mean" : "max ", val(0), pp[0], val(1), pp[1], val(2), pp[2],
-                    val(3), 100.0 * (val(3) / val(0) - 1.0));
-      os << buf;
+      os << control::format("%-6s (%s)         | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f   %6.3f   | %6.3f  %+5.0f%%\n",
+                            rr.name.c_str(), stat == 0 ? "mean" : "max ", val(0), pp[0], val(1), pp[1], val(2), pp[2],
+                            val(3), 100.0 * (val(3) / val(0) - 1.0));
     }
   }
 }
 
 /// Each mode's reduction of mean |e| against PID, ours and the paper's, and the two checks the bench makes.
 void write_reductions(std::ostream& os, const PaperBenchResult& r) {
-  char buf[256];
   os << "\nReduction of mean |e| versus PID (ours / paper):\n";
   for (size_t i = 0; i < r.references.size(); ++i) {
     const auto& rr = r.references[i];
     const auto& paper = kPaperTableIII[i];
     auto red = [](double x, double ref) { return 100.0 * (1.0 - x / ref); };
     const double pid = rr.modes[0].errors.mean_abs_um;
-    std::snprintf(buf, sizeof buf,
-                  "  %-6s inverse/PID %5.1f%% / %5.1f%%   inverse/PID/DOB %5.1f%% / %5.1f%%   "
-                  "inv/PID/DOB/FF %5.1f%%   ranking DOB < inverse < PID: %s   FF within 2x noise floor: %s\n",
-                  rr.name.c_str(), red(rr.modes[1].errors.mean_abs_um, pid), red(paper.mean_um[1], paper.mean_um[0]),
-                  red(rr.modes[2].errors.mean_abs_um, pid), red(paper.mean_um[2], paper.mean_um[0]),
-                  red(rr.modes[3].errors.mean_abs_um, pid), paper_ranking_holds(rr) ? "yes" : "NO",
-                  rr.modes[3].errors.mean_abs_um <= 2.0 * r.noise_floor_um ? "yes" : "NO");
-    os << buf;
+    os << control::format("  %-6s inverse/PID %5.1f%% / %5.1f%%   inverse/PID/DOB %5.1f%% / %5.1f%%   "
+                          "inv/PID/DOB/FF %5.1f%%   ranking DOB < inverse < PID: %s   FF within 2x noise floor: %s\n",
+                          rr.name.c_str(), red(rr.modes[1].errors.mean_abs_um, pid), red(paper.mean_um[1], paper.mean_um[0]),
+                          red(rr.modes[2].errors.mean_abs_um, pid), red(paper.mean_um[2], paper.mean_um[0]),
+                          red(rr.modes[3].errors.mean_abs_um, pid), paper_ranking_holds(rr) ? "yes" : "NO",
+                          rr.modes[3].errors.mean_abs_um <= 2.0 * r.noise_floor_um ? "yes" : "NO");
   }
 }
 
 /// The error without sensor noise on this rig beside that on a rig equal to the model (bandwidth alone).
 void write_error_sources(std::ostream& os, const PaperBenchResult& r) {
-  char buf[256];
   os << "\nWhere the error comes from, mean |r - y_true| in um (no sensor noise): on this rig / on a rig that\n"
         "equals the model (finite loop bandwidth alone). Where the two are close, the mode is limited by its\n"
         "bandwidth, not by model mismatch, and a disturbance observer cannot help:\n";
   for (const auto& rr : r.references) {
-    std::snprintf(buf, sizeof buf, "  %-6s", rr.name.c_str());
-    os << buf;
+    os << control::format("  %-6s", rr.name.c_str());
     for (const auto& m : rr.modes) {
-      std::snprintf(buf, sizeof buf, "   %s %.3f / %.3f", std::string(control::to_string(m.mode)).c_str(),
-                    m.errors.mean_abs_true_um, m.bandwidth_only_mean_um);
-      os << buf;
+      os << control::format("   %s %.3f / %.3f", std::string(control::to_string(m.mode)).c_str(),
+                            m.errors.mean_abs_true_um, m.bandwidth_only_mean_um);
     }
     os << "\n";
   }
@@ -115,13 +108,10 @@ void write_error_sources(std::ostream& os, const PaperBenchResult& r) {
 
 std::string format_table(const PaperBenchResult& r, const PaperBenchOptions& o) {
   std::ostringstream os;
-  char buf[256];
-  std::snprintf(buf, sizeof buf,
-                "Simulated rig (default: the paper rig, truth n=3, model n=2), every mode's PID tuned to crossover %.0f rad/s, phase "
-                "margin %.0f deg on the plant it sees;\nerrors |r - y_measured| over %.0f..%.0f s. "
-                "Sensor-noise floor (mean |noise|): %.3f um.\n\n",
-                o.tuning.crossover_rad_s, o.tuning.phase_margin_deg, o.settle_s, o.duration_s, r.noise_floor_um);
-  os << buf;
+  os << control::format("Simulated rig (default: the paper rig, truth n=3, model n=2), every mode's PID tuned to crossover %.0f rad/s, phase "
+                        "margin %.0f deg on the plant it sees;\nerrors |r - y_measured| over %.0f..%.0f s. "
+                        "Sensor-noise floor (mean |noise|): %.3f um.\n\n",
+                        o.tuning.crossover_rad_s, o.tuning.phase_margin_deg, o.settle_s, o.duration_s, r.noise_floor_um);
   write_table_iii(os, r);
   write_reductions(os, r);
   write_error_sources(os, r);
