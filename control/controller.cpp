@@ -2,10 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <sstream>
 
 #include "control/config_error.hpp"
+#include "control/text_format.hpp"
 
 namespace pvcgel::control {
 
@@ -126,12 +126,10 @@ void Controller::tune_modes() {
     check_gains(gains_[i], m, cfg.sample_time_s);
     margins_[i] = loop_margins(pid_transfer_function(gains_[i], cfg.sample_time_s), plant, cfg.sample_time_s);
     if (!margins_[i].stable()) {
-      char buf[200];
-      std::snprintf(buf, sizeof buf,
-                    "closed loop of mode %s is unstable on the configured model (largest closed-loop pole "
-                    "|z| = %.4f >= 1); reduce the gains",
-                    to_string(m).data(), margins_[i].max_closed_loop_pole_abs);
-      throw ConfigError("controller.pid." + std::string(to_string(m)), buf);
+      throw ConfigError("controller.pid." + std::string(to_string(m)),
+                        format("closed loop of mode %s is unstable on the configured model (largest closed-loop pole "
+                               "|z| = %.4f >= 1); reduce the gains",
+                               to_string(m).data(), margins_[i].max_closed_loop_pole_abs));
     }
   }
 }

@@ -2,7 +2,6 @@
 #include "control/text_format.hpp"
 
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <numbers>
 
@@ -92,13 +91,11 @@ TuningResult tune_pid(const DiscreteTransferFunction& plant, double Ts, const Tu
     ph_a = ph - need_deg;
   }
   if (!found) {
-    char buf[320];
-    std::snprintf(buf, sizeof buf,
-                  "no PID reaches %.0f deg phase margin at %.1f rad/s: the plant's phase there is %.1f deg, "
-                  "so the controller must add %.1f deg, but this PID family spans -90..%.1f deg; lower the "
-                  "crossover or the phase margin",
-                  t.phase_margin_deg, wc, std::arg(P) * kDeg, need_deg, max_phase);
-    throw ConfigError("controller.tuning", buf);
+    throw ConfigError("controller.tuning",
+                      format("no PID reaches %.0f deg phase margin at %.1f rad/s: the plant's phase there is %.1f deg, "
+                             "so the controller must add %.1f deg, but this PID family spans -90..%.1f deg; lower the "
+                             "crossover or the phase margin",
+                             t.phase_margin_deg, wc, std::arg(P) * kDeg, need_deg, max_phase));
   }
   for (int it = 0; it < 80; ++it) {  // bisection on log Ti
     const double mid = std::sqrt(Ti_a * Ti_b);

@@ -1,9 +1,9 @@
 #include "control/polynomial_inverse.hpp"
 
 #include <cmath>
-#include <cstdio>
 
 #include "control/config_error.hpp"
+#include "control/text_format.hpp"
 
 namespace pvcgel::control {
 
@@ -11,25 +11,16 @@ PolynomialInverse::PolynomialInverse(OddPolynomial f, double lower_V, double upp
                                      const std::string& key)
     : f_(std::move(f)), lower_V_(lower_V), upper_V_(upper_V) {
   if (!(lower_V >= 0.0 && upper_V > lower_V && upper_V <= 1000.0)) {
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "inverse range [%g, %g] V must satisfy 0 <= lower < upper <= 1000",
-                  lower_V, upper_V);
-    throw ConfigError(key, buf);
+    throw ConfigError(key, format("inverse range [%g, %g] V must satisfy 0 <= lower < upper <= 1000", lower_V, upper_V));
   }
   if (const auto turn = f_.first_turnover(upper_V)) {
-    char buf[256];
-    if (*turn <= 0.0) {
-      std::snprintf(buf, sizeof buf,
-                    "f is not increasing at 0 V (c1 = %g): the inverse compensator needs f strictly "
-                    "increasing on [0, %g] V",
-                    f_.coefficient(1), upper_V);
-    } else {
-      std::snprintf(buf, sizeof buf,
-                    "f is not strictly increasing on [0, %g] V: f'(x) = 0 at x = %.1f V (f turns over "
-                    "there). Usable range is 0..%.0f V: set the upper voltage limit below that or refit f",
-                    upper_V, *turn, std::floor(*turn));
-    }
-    throw ConfigError(key, buf);
+    if (*turn <= 0.0)
+      throw ConfigError(key, format("f is not increasing at 0 V (c1 = %g): the inverse compensator needs f strictly "
+                                    "increasing on [0, %g] V",
+                                    f_.coefficient(1), upper_V));
+    throw ConfigError(key, format("f is not strictly increasing on [0, %g] V: f'(x) = 0 at x = %.1f V (f turns over "
+                                  "there). Usable range is 0..%.0f V: set the upper voltage limit below that or refit f",
+                                  upper_V, *turn, std::floor(*turn)));
   }
   w_lower_ = f_(lower_V_);
   w_upper_ = f_(upper_V_);

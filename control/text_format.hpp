@@ -11,12 +11,14 @@
 
 namespace pvcgel::control {
 
-/// `printf_format` applied to `values` (at most 511 characters).
+/// `printf_format` applied to `values`, however long (measured first, then written).
 template <typename... Args>
 std::string format(const char* printf_format, Args... values) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, printf_format, values...);
-  return buf;
+  const int length = std::snprintf(nullptr, 0, printf_format, values...);
+  if (length <= 0) return {};
+  std::string out(static_cast<size_t>(length), '\0');
+  std::snprintf(out.data(), out.size() + 1, printf_format, values...);
+  return out;
 }
 
 /// `parts` with `separator` between them: "a, b, c".

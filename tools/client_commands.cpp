@@ -37,13 +37,10 @@ std::string state_line(const pvcgel_v1_Status& s) {
   const auto mode = dds::checked_from_wire<control::ControllerMode>(s.mode, "Status.mode");
   const auto target = dds::checked_from_wire<daemon::LoopTarget>(s.target, "Status.target");
   const bool faulted = fault != daemon::FaultReason::none;
-  char buf[400];
-  std::snprintf(buf, sizeof buf, "%s%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s",
-                daemon::to_string(state).data(), faulted ? " (fault " : "", faulted ? daemon::to_string(fault).data() : "",
-                faulted ? ")" : "", control::to_string(mode).data(), daemon::to_string(target).data(),
-                s.high_voltage ? "on" : "off", s.t_s,
+  return format("%s%s%s%s, mode %s, target %s, HV %s, t %.3f s, queued to %s", daemon::to_string(state).data(),
+                faulted ? " (fault " : "", faulted ? daemon::to_string(fault).data() : "", faulted ? ")" : "",
+                control::to_string(mode).data(), daemon::to_string(target).data(), s.high_voltage ? "on" : "off", s.t_s,
                 s.queued_until_s > s.t_s ? format("%.3f s", s.queued_until_s).c_str() : "(nothing)");
-  return buf;
 }
 
 void print_status(const pvcgel_v1_Status& s) {
@@ -272,14 +269,12 @@ void watch(DdsClient& c, double duration_s) {
     const auto now = std::chrono::steady_clock::now();
     if (now - last_print >= std::chrono::milliseconds(tty ? 100 : 1000)) {
       const auto& s = c.status();
-      char line[400];
-      if (have)
-        std::snprintf(line, sizeof line, "t %9.3f s  r %8.3f  y %8.3f um  u %7.1f V  e %+7.3f um  rms(e) %.3f um  | %s",
-                      last.t_s, last.r_um, last.y_um, last.u_V, last.e_um, n ? std::sqrt(err_sq / static_cast<double>(n)) : 0.0,
-                      state_line(s).c_str());
-      else
-        std::snprintf(line, sizeof line, "(no telemetry yet) | %s", state_line(s).c_str());
-      std::printf(tty ? "\r\033[K%s" : "%s\n", line);
+      const std::string line =
+          have ? format("t %9.3f s  r %8.3f  y %8.3f um  u %7.1f V  e %+7.3f um  rms(e) %.3f um  | %s", last.t_s, last.r_um,
+                        last.y_um, last.u_V, last.e_um, n ? std::sqrt(err_sq / static_cast<double>(n)) : 0.0,
+                        state_line(s).c_str())
+               : "(no telemetry yet) | " + state_line(s);
+      std::printf(tty ? "\r\033[K%s" : "%s\n", line.c_str());
       std::fflush(stdout);
       last_print = now;
     }

@@ -7,7 +7,6 @@
 #include <mutex>
 #include <optional>
 #include <stdexcept>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -41,8 +40,7 @@ namespace {
 /// The case's first recording as caseNN.csv in `save_dir`, and its label line (kept apart from it).
 void save_case(const std::filesystem::path& save_dir, std::ofstream& labels, int number, EffectKind kind,
                const GeneratedCase& c) {
-  char name[32];
-  std::snprintf(name, sizeof name, "case%02d.csv", number);
+  const std::string name = format("case%02d.csv", number);
   control::identification::SineRecord rec;
   rec.sample_time_s = c.recordings[0].sample_time_s;
   rec.t_s = c.recordings[0].t_s;
@@ -55,15 +53,12 @@ void save_case(const std::filesystem::path& save_dir, std::ofstream& labels, int
 
 /// One case's line of the suite's log.
 std::string case_line(int number, const DiagnosisResult& d, EffectKind kind, const GeneratedCase& c, bool ok, double secs) {
-  char line[512];
-  std::snprintf(line, sizeof line,
-                "%3d verdict %-24s truth %-24s %s  effect RMS %.3f um (peak %.2f um)%s  held-out RMSE %.4f -> %.4f um  "
+  return format("%3d verdict %-24s truth %-24s %s  effect RMS %.3f um (peak %.2f um)%s  held-out RMSE %.4f -> %.4f um  "
                 "%.2f s  [%s%s]\n",
                 number, d.verdict.c_str(), std::string(to_string(kind)).c_str(), ok ? "ok   " : "WRONG",
                 c.truth.effect_rms_um, c.truth.effect_peak_um, c.truth.within_spec ? "" : " (out of spec)",
                 d.baseline.rmse_validation_um, d.fitted.rmse_validation_um, secs, c.truth.closed_loop ? "closed loop: " : "",
                 c.truth.input.c_str());
-  return line;
 }
 
 /// Counts the case in `r`: confusion, accuracy, false alarms; returns whether it is right.
@@ -122,34 +117,21 @@ BlindSuiteResult run_blind_suite(int cases, std::uint64_t seed, std::ostream& lo
 
 std::string format_suite(const BlindSuiteResult& r) {
   std::string s = "confusion matrix (rows: truth, columns: verdict)\n";
-  char b[256];
-  std::snprintf(b, sizeof b, "%-24s", "");
-  s += b;
-  for (int j = 0; j < BlindSuiteResult::kLabels; ++j) {
-    std::snprintf(b, sizeof b, " %4.4s", label_name(j).c_str());
-    s += b;
-  }
+  s += format("%-24s", "");
+  for (int j = 0; j < BlindSuiteResult::kLabels; ++j) s += format(" %4.4s", label_name(j).c_str());
   s += "\n";
   for (int i = 0; i < BlindSuiteResult::kLabels - 1; ++i) {
-    std::snprintf(b, sizeof b, "%-24s", label_name(i).c_str());
-    s += b;
-    for (int j = 0; j < BlindSuiteResult::kLabels; ++j) {
-      std::snprintf(b, sizeof b, " %4d", r.confusion[static_cast<size_t>(i)][static_cast<size_t>(j)]);
-      s += b;
-    }
+    s += format("%-24s", label_name(i).c_str());
+    for (int j = 0; j < BlindSuiteResult::kLabels; ++j)
+      s += format(" %4d", r.confusion[static_cast<size_t>(i)][static_cast<size_t>(j)]);
     s += "\n";
   }
-  std::snprintf(b, sizeof b,
-                "accuracy %d/%d = %.1f%% (target >= 90%%), false alarms on none %d/%d (target <= 1), cases out of "
-                "concealment spec %d\n",
-                r.correct, r.cases, 100.0 * r.accuracy(), r.false_alarms, r.none_cases, r.out_of_spec);
-  s += b;
-  std::snprintf(b, sizeof b,
-                "held-out RMSE fitted/nominal on correct effect cases: mean %.3f, worst %.3f (target <= 0.50)\n",
-                r.mean_ratio, r.worst_ratio);
-  s += b;
-  std::snprintf(b, sizeof b, "diagnosis time per case: mean %.2f s, max %.2f s (target <= 30 s)\n", r.mean_case_s, r.max_case_s);
-  s += b;
+  s += format("accuracy %d/%d = %.1f%% (target >= 90%%), false alarms on none %d/%d (target <= 1), cases out of "
+              "concealment spec %d\n",
+              r.correct, r.cases, 100.0 * r.accuracy(), r.false_alarms, r.none_cases, r.out_of_spec);
+  s += format("held-out RMSE fitted/nominal on correct effect cases: mean %.3f, worst %.3f (target <= 0.50)\n",
+              r.mean_ratio, r.worst_ratio);
+  s += format("diagnosis time per case: mean %.2f s, max %.2f s (target <= 30 s)\n", r.mean_case_s, r.max_case_s);
   return s;
 }
 
@@ -248,10 +230,8 @@ struct CaseOutcome {
 std::string leaders_text(const DiagnosisResult& d) {
   std::string text;
   for (size_t i = 0; i < d.candidates.size() && i < 3 && d.candidates[i].fitted; ++i) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%s%s %.2f", text.empty() ? "" : " ", std::string(to_string(d.candidates[i].effect.kind)).c_str(),
-                  excess_share_left(d, d.candidates[i].errors));
-    text += b;
+    text += format("%s%s %.2f", text.empty() ? "" : " ", std::string(to_string(d.candidates[i].effect.kind)).c_str(),
+                   excess_share_left(d, d.candidates[i].errors));
   }
   return text;
 }
@@ -319,15 +299,13 @@ std::string case_line(const LabelledCase& c, const CaseOutcome& o) {
                                                     : "  best pair: " + join(o.pair.effects, "+") + " (" +
                                                           join(second_effect_shortfalls(o.pair), ", ") + ")" +
                                                           seconds_tried(o.pair);
-  char line[1024];
-  std::snprintf(line, sizeof line, "%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s%s\n",
+  return format("%s truth %-34s verdict %-24s mixture %-34s %s held-out ratio %.3f  %.1f s  [%s]%s%s%s%s%s%s%s%s%s%s\n",
                 c.name.c_str(), c.effects.c_str(), o.verdict.c_str(), o.mixture.empty() ? "-" : o.mixture.c_str(),
                 scored_right(c, o) ? "ok   " : "WRONG", o.ratio, o.seconds, o.leaders.c_str(), o.widened ? "  widened" : "",
                 o.at_bounds.empty() ? "" : "  refit at bound: ", o.at_bounds.c_str(),
                 o.withheld.empty() ? "" : "  withheld second: ", o.withheld.c_str(),
                 o.ambiguous.empty() ? "" : "  ambiguous with: ", o.ambiguous.c_str(), pair.c_str(),
                 o.error.empty() ? "" : "  error: ", o.error.c_str());
-  return line;
 }
 
 /// Adds a correct effect case's held-out ratios.
@@ -448,15 +426,12 @@ std::string held_out_ratios(const DirectorySuiteResult& r) {
       shown.empty() ? "no such cases"
                     : format("worst %.3f, %td above 0.50", *std::max_element(shown.begin(), shown.end()),
                              std::count_if(shown.begin(), shown.end(), [](double x) { return x > 0.5; }));
-  char b[1024];
-  std::snprintf(b, sizeof b,
-                "held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
+  return format("held-out RMSE fitted/nominal on correct cases: mean %.3f, median %.3f, worst %.3f (target <= 0.50: worst/target %.2f);\n"
                 "  against the nominal with offset and start state fitted: worst %.3f;\n"
                 "  on the %zu whose held-out data show the effect (nominal held-out RMSE >= %.1fx the noise): %s; "
                 "the other %zu: the held-out blocks fall where the effect does not act\n",
                 mean, sorted[sorted.size() / 2], worst, worst / 0.5, worst_aligned, shown.size(),
                 DirectorySuiteResult::kHeldOutShowsEffect, shown_worst.c_str(), r.ratios.size() - shown.size());
-  return b;
 }
 
 /// "single effects by the labels' form, those with a miss, the weakest first (right/cases): hysteresis/bouc_wen
@@ -503,30 +478,25 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
   s = s.substr(0, s.find("accuracy"));  // the matrix only; the scores follow with the issue 11 targets
   // A score over no cases (a suite of `none` recordings has no single effects) says so instead of nan%.
   const auto score = [](const char* what, int a, int n, const char* target, double ratio_to_target) {
-    char line[256];
-    if (n == 0) std::snprintf(line, sizeof line, "%s: no such cases", what);
-    else std::snprintf(line, sizeof line, "%s %d/%d = %.1f%% (target %s: ratio %.2f)", what, a, n, 100.0 * a / n, target,
-                       100.0 * a / n / ratio_to_target);
-    return std::string(line);
+    if (n == 0) return format("%s: no such cases", what);
+    return format("%s %d/%d = %.1f%% (target %s: ratio %.2f)", what, a, n, 100.0 * a / n, target,
+                  100.0 * a / n / ratio_to_target);
   };
-  char b[2048];
-  std::snprintf(b, sizeof b,
-                "cases %d (single effects %d, none %d, mixtures %d; %d stopped with an error)\n%s\n%s\n%s; dominant named %d/%d\n%s"
-                "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
-                "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
-                "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
-                "refit widened (not none at the ordinary tolerances; the gain stopped at its own, or f's shape did and "
-                "the widened refit was none): %d cases, %d of them right\n"
-                "single effects answered as ambiguous: %d (the verdict right in %d; the truth among the other names in %d)\n",
-                r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed,
-                score("single-effect accuracy", r.single_correct, r.single_cases, ">= 95%", 95.0).c_str(),
-                score("false alarms on none", r.false_alarms, r.none_cases, "<= 2%", 2.0).c_str(),
-                score("mixtures with both effects named", r.mixture_both_named, r.mixture_cases, ">= 80%", 80.0).c_str(),
-                r.mixture_dominant_correct, r.mixture_cases, held_out_ratios(r).c_str(), r.mean_case_s, r.max_case_s,
-                r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
-                r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right,
-                r.single_ambiguous, r.single_ambiguous_right, r.single_truth_among_ambiguous);
-  s += b;
+  s += format("cases %d (single effects %d, none %d, mixtures %d; %d stopped with an error)\n%s\n%s\n%s; dominant named %d/%d\n%s"
+              "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
+              "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
+              "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
+              "refit widened (not none at the ordinary tolerances; the gain stopped at its own, or f's shape did and "
+              "the widened refit was none): %d cases, %d of them right\n"
+              "single effects answered as ambiguous: %d (the verdict right in %d; the truth among the other names in %d)\n",
+              r.cases, r.single_cases, r.none_cases, r.mixture_cases, r.failed,
+              score("single-effect accuracy", r.single_correct, r.single_cases, ">= 95%", 95.0).c_str(),
+              score("false alarms on none", r.false_alarms, r.none_cases, "<= 2%", 2.0).c_str(),
+              score("mixtures with both effects named", r.mixture_both_named, r.mixture_cases, ">= 80%", 80.0).c_str(),
+              r.mixture_dominant_correct, r.mixture_cases, held_out_ratios(r).c_str(), r.mean_case_s, r.max_case_s,
+              r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
+              r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right,
+              r.single_ambiguous, r.single_ambiguous_right, r.single_truth_among_ambiguous);
   if (r.visible_single_cases + r.visible_mixture_cases > 0)
     s += format("effects leaving at least %.1fx the noise RMS after a gain and offset refit (the labels' "
                 "ratio_after_gain_offset_refit): single effects %d/%d, mixtures with both named %d/%d\n",

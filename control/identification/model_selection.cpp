@@ -2,7 +2,6 @@
 #include "control/text_format.hpp"
 
 #include <cmath>
-#include <cstdio>
 #include <sstream>
 #include <stdexcept>
 
@@ -53,10 +52,7 @@ ModelChoice choose_by_validation(const NonlinearityFit& fit, const std::vector<s
   os << ")";
   if (const auto turn = turnover(fit.candidate(choice.terms), o.amplifier_max_V)) {
     choice.voltage_max_V = std::floor((1.0 - o.turnover_margin) * *turn);
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "; f turns over at %.1f V, so the voltage limit is %.0f V", *turn,
-                  *choice.voltage_max_V);
-    os << buf;
+    os << format("; f turns over at %.1f V, so the voltage limit is %.0f V", *turn, *choice.voltage_max_V);
   }
   choice.rule = os.str();
   return choice;
