@@ -546,6 +546,20 @@ TEST(DiagnoseIndependentCases, ASmoothDeadZoneBendingOneStepLevelIsADeadZone) {
   EXPECT_LE(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, APairStartThePlantCannotSimulateIsAFailedFitNotAnError) {
+  // A fresh case of the independent generator (tests/data/nan_pair_start/README.md): a 313 Hz mode on a
+  // 10 kHz piezo. A pair fit started where the simulation is not finite; its NaN step put f's shape at NaN
+  // and the model check threw, so the diagnosis stopped and wrote nothing.
+  const auto o = diagnose_data("nan_pair_start", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "resonance") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::resonance) << o.summary;
+  EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.baseline.rmse_validation_um) << o.summary;
+  for (const auto& tried : r.second_effect_test.tried)
+    EXPECT_FALSE(std::isnan(tried.score)) << tried.effects[0] << "+" << tried.effects[1] << "\n" << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
