@@ -408,6 +408,67 @@ struct WideStart {
   const std::vector<CandidateResult>* ordinary_fits = nullptr;
 };
 
+/// Where a diagnosis_pass stands between runs of its first stages.
+struct PassState {
+  DiagnosisOptions o;                     // the tolerances in force
+  std::vector<std::string> widened_from;  // why `o` is widened; empty at the ordinary tolerances
+  bool shape_tried = false;               // the refit with a wider curve ran (or this pass is wide)
+  std::optional<SecondPass> second;       // the delay the leading candidate asked for
+  std::optional<Nominal> narrow;          // the ordinary pass's refit, once widened
+  int earlier_simulations = 0;            // of the runs before the one that decides
+};
+
+/// The nominal's static curve is far off (static_curve_off): true when everything must run again, wider.
+bool widen_whole_pass(PassState& st, const PassStart& p, const DiagnosisOptions& options) {
+  st.widened_from = static_curve_off(p.res.nominal_refit);
+  if (st.widened_from.empty()) return false;
+  st.o = widened_tolerances(options);
+  st.narrow = p.k;
+  st.earlier_simulations += p.problem.simulations();
+  return true;
+}
+
+/// f's shape alone at its bound: a wider f may make the data none (the `none` test once more, f's shape and
+/// next term free to widened_tolerances), and then that is the answer. Effects are fitted wider only in a
+/// second diagnosis that must predict the held-out data better (a dead zone or a saturation may be what
+/// bends the curve): handed to `wider_curve`, begun, when its refit leaves little enough of the excess.
+std::optional<DiagnosisResult> try_wider_curve(PassState& st, const PassStart& p, const HammersteinModel& model,
+                                               const std::vector<Series>& data, const DiagnosisOptions& options,
+                                               WideStart* wider_curve) {
+  auto off = shape_off(p.res.nominal_refit);
+  if (off.empty()) return std::nullopt;
+  auto wide = start_pass(model, data, widened_tolerances(options), std::nullopt, p.k);
+  if (wide.none) {
+    wide.res.nominal_refit.widened_from = std::move(off);
+    wide.res.simulations = st.earlier_simulations + p.problem.simulations() + wide.problem.simulations();
+    return std::move(wide.res);
+  }
+  st.shape_tried = true;
+  if (wider_curve && Excess(wide.res).base <= st.o.wider_curve_excess * Excess(p.res).base) {
+    wider_curve->from = std::move(off);
+    wider_curve->start.emplace(std::move(wide));  // its simulations are the second run's to count
+  } else {
+    st.earlier_simulations += wide.problem.simulations();
+  }
+  return std::nullopt;
+}
+
+/// 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict. False, with st.second set, when
+/// the leading candidate fits clearly better at another delay: the pass runs once more at that delay.
+bool fit_and_decide(PassState& st, PassStart& p, const std::vector<Series>& data,
+                    const std::vector<CandidateResult>* ordinary_fits) {
+  const WarmStarts warm = st.second ? WarmStarts{&st.second->candidates, "candidate fits at the new delay"}
+                                    : WarmStarts{ordinary_fits, "candidate fits from the ordinary run's", kRegriddedLeaders};
+  fit_candidates(p.res, p.problem, data, p.scale, st.o, p.problem.residual({}, p.k).squaredNorm(), warm);
+  if (const auto d = st.second ? std::nullopt : leading_delay(p.res, p.problem, data, p.scale, st.o)) {
+    st.second = SecondPass{p.res.alignment, p.res.candidates, d->delay_samples, d->candidate};
+    st.earlier_simulations += p.problem.simulations();
+    return false;
+  }
+  decide(p.res, p.problem, data, p.scale, st.o);
+  return true;
+}
+
 /// One diagnosis at the tolerances `options` gives, or from the start at widened_tolerances when
 /// `widened.from` names why (its first stages already run when `widened.start` holds them). `wider_curve` is
 /// set when f's shape alone stopped at its bound and the widened nuisance-only refit, not `none`, leaves at
@@ -415,60 +476,22 @@ struct WideStart {
 /// caller offers a widened diagnosis, begun.
 DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<Series>& data,
                                const DiagnosisOptions& options, WideStart widened, WideStart* wider_curve) {
-  std::optional<SecondPass> second;
-  int earlier_simulations = 0;  // of the passes before the one that decides
-  std::vector<std::string> widened_from = std::move(widened.from);
-  DiagnosisOptions o = widened_from.empty() ? options : widened_tolerances(options);  // the tolerances in force
-  bool shape_tried = !widened_from.empty();  // the refit with a wider curve ran (or this pass is wide)
+  PassState st;
+  st.shape_tried = !widened.from.empty();
+  st.o = st.shape_tried ? widened_tolerances(options) : options;
+  st.widened_from = std::move(widened.from);
   std::optional<PassStart> begun = std::move(widened.start);
-  std::optional<Nominal> narrow;  // the ordinary pass's refit, once widened
   for (;;) {
-    auto [res, problem, scale, k, refit, none] = begun ? *std::move(begun) : start_pass(model, data, o, second, narrow);
+    PassStart p = begun ? *std::move(begun) : start_pass(model, data, st.o, st.second, st.narrow);
     begun.reset();
-    if (!none && o.widen_off_nominal && widened_from.empty() && !shape_tried) {
-      widened_from = static_curve_off(res.nominal_refit);
-      if (!widened_from.empty()) {
-        o = widened_tolerances(options);  // the nominal's static curve is far off: everything again, wider
-        narrow = k;
-        earlier_simulations += problem.simulations();
-        continue;
-      }
-      // f's shape alone at its bound: a wider f may make the data none (the `none` test once more, f's shape
-      // and next term free to widened_tolerances); effects are fitted wider only in a second diagnosis that
-      // must predict the held-out data better (a dead zone or a saturation may be what bends the curve).
-      if (auto off = shape_off(res.nominal_refit); !off.empty()) {
-        auto wide = start_pass(model, data, widened_tolerances(options), std::nullopt, k);
-        if (wide.none) {
-          wide.res.nominal_refit.widened_from = std::move(off);
-          wide.res.simulations = earlier_simulations + problem.simulations() + wide.problem.simulations();
-          return std::move(wide.res);
-        }
-        shape_tried = true;
-        if (wider_curve && Excess(wide.res).base <= o.wider_curve_excess * Excess(res).base) {
-          wider_curve->from = std::move(off);
-          wider_curve->start.emplace(std::move(wide));  // its simulations are the second run's to count
-        } else {
-          earlier_simulations += wide.problem.simulations();
-        }
-      }
+    if (!p.none && st.o.widen_off_nominal && st.widened_from.empty() && !st.shape_tried) {
+      if (widen_whole_pass(st, p, options)) continue;
+      if (auto none = try_wider_curve(st, p, model, data, options, wider_curve)) return std::move(*none);
     }
-    res.nominal_refit.widened_from = widened_from;
-    if (!none) {
-      // 4. Candidates, fitted jointly with the nuisance refit; once more at the delay the leader takes;
-      // 5. the verdict.
-      const WarmStarts warm = second ? WarmStarts{&second->candidates, "candidate fits at the new delay"}
-                                     : WarmStarts{widened.ordinary_fits, "candidate fits from the ordinary run's",
-                                                  kRegriddedLeaders};
-      fit_candidates(res, problem, data, scale, o, problem.residual({}, k).squaredNorm(), warm);
-      if (const auto d = second ? std::nullopt : leading_delay(res, problem, data, scale, o)) {
-        second = SecondPass{res.alignment, res.candidates, d->delay_samples, d->candidate};
-        earlier_simulations += problem.simulations();
-        continue;
-      }
-      decide(res, problem, data, scale, o);
-    }
-    res.simulations = earlier_simulations + problem.simulations();
-    return std::move(res);
+    p.res.nominal_refit.widened_from = st.widened_from;
+    if (!p.none && !fit_and_decide(st, p, data, widened.ordinary_fits)) continue;
+    p.res.simulations = st.earlier_simulations + p.problem.simulations();
+    return std::move(p.res);
   }
 }
 
