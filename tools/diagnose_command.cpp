@@ -328,7 +328,8 @@ std::string effect_tables_toml(const std::vector<Effect>& effects, const std::st
 
 }  // namespace
 
-std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, const std::string& comment) {
+std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, double sample_time_s,
+                                 const std::string& comment) {
   const auto& nr = r.nominal_refit;
   std::ostringstream s;
   std::istringstream in(comment);
@@ -362,11 +363,16 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   if (r.mixture.empty()) s << "\n# No effect to compensate (verdict: " << r.verdict << ").\n";
   s << effect_tables_toml(r.mixture, "model.effect") << "\n";
   if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
-  const auto turn = refit.f.first_turnover(1000.0);
-  if (turn && lm.other_tables.find("[controller]") == std::string::npos) {
+  if (lm.other_tables.find("[controller]") == std::string::npos) {
+    // The loop, and so the sim backend, at the recordings' period: io_delay_samples counts in it, and a
+    // mode above 0.4x the default 1 kHz (a 10 kHz piezo's) is out of range at 1 kHz.
+    s << "# The recordings' sample time: the sim backend runs at it.\n[controller]\nperiod_s = "
+      << number_or_null(sample_time_s, "%.9g") << "\n";
     // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
-    s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\n[controller]\nvoltage_max_V = "
-      << number_or_null(std::floor(0.99 * *turn), "%.0f") << "\n\n";
+    if (const auto turn = refit.f.first_turnover(1000.0))
+      s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\nvoltage_max_V = "
+        << number_or_null(std::floor(0.99 * *turn), "%.0f") << "\n";
+    s << "\n";
   }
   s << "[sim]\nio_delay_samples = " << io << "\nnoise_sigma_um = " << number_or_null(r.noise_sigma_um, "%.4g")
     << "\nquantization_um = 0.0\n\n"
@@ -652,7 +658,11 @@ DiagnoseOutcome run_diagnose(const DiagnoseArgs& a) {
   if (!a.json.empty()) write_text_file(a.json, diagnosis_json(r, a.recordings, skipped, cpu));
   if (!a.report.empty()) write_report(a.report, r, data, a.recordings, out.summary, model_path);
   if (!model_path.empty()) {
-    const std::string text = augmented_model_toml(lm, r, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
+    // The slowest recording's period: the fitted effects' bounds (a mode below 0.4x its rate) hold at it.
+    const double period_s = std::max_element(data.begin(), data.end(), [](const Series& x, const Series& y) {
+                              return x.sample_time_s < y.sample_time_s;
+                            })->sample_time_s;
+    const std::string text = augmented_model_toml(lm, r, period_s, "pvcgel diagnose: augmented model\nverdict: " + r.verdict + "\n" + r.explanation);
     // The file must be what the sim backend accepts (a controller is not needed to diagnose).
     write_checked_toml(
         model_path, text, [](const toml::table& t, const std::string& p) { (void)control::parse_simulated_rig(t, p); },

@@ -51,9 +51,11 @@ std::string augmented_model_path(const DiagnoseArgs& args);
 /// `[[model.effect]]` (the diagnosed effects, dominant first, for the controller
 /// to compensate), the user's other tables unchanged, and a `[sim]` table whose
 /// `[sim.truth]` is the same model with the same effects in
-/// `[[sim.truth.effect]]`, so pvcgeld's sim backend runs it.
+/// `[[sim.truth.effect]]`, so pvcgeld's sim backend runs it; without the
+/// user's `[controller]`, one whose `period_s` is `sample_time_s` (the
+/// recordings': the sim backend then runs at their rate).
 std::string augmented_model_toml(const LoadedModel& model, const control::diagnosis::DiagnosisResult& result,
-                                 const std::string& comment);
+                                 double sample_time_s, const std::string& comment);
 
 /// The JSON report (schema of issue 7).
 std::string diagnosis_json(const control::diagnosis::DiagnosisResult& result, const std::vector<std::string>& recordings,

@@ -40,6 +40,10 @@ struct DiagnosisOptions {
   /// Fits with hysteresis may make G faster, down to this time scale: a nominal identified on data with a
   /// loop has drawn part of it as lag (a slower G), which the loop takes back.
   double hysteresis_time_scale_min = 0.1;
+  /// ... granted to a loop that does work: a loop fit with G faster than time_scale_tolerance allows is
+  /// refitted within it when setting its alpha to 0 (the rest as fitted) raises the fit-segment MSE by less
+  /// than this share of the MSE without the loop; the faster G alone then explains the data.
+  double hysteresis_loop_min_share = 0.25;
   /// The loop's free shape (threshold_spread) is kept only when it lowers the fit-segment MSE of the loop
   /// with the earlier shape (spread 0) by this share; below it the two-parameter loop is reported.
   double hysteresis_shape_min_gain = 0.25;

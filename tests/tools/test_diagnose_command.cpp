@@ -560,6 +560,26 @@ TEST(DiagnoseIndependentCases, APairStartThePlantCannotSimulateIsAFailedFitNotAn
     EXPECT_FALSE(std::isnan(tried.score)) << tried.effects[0] << "+" << tried.effects[1] << "\n" << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, ALoopThatDoesNoWorkDoesNotBuyAFasterG) {
+  // A fresh case of the independent generator (tests/data/idle_loop_faster_g/README.md): an 87 Hz mode
+  // beside a piezo's dynamics. The loop fit took G 0.65x as fast, beyond the nuisance refit's tolerance, at
+  // alpha -1.2e-4 (the loop itself did nothing), and the faster G made hysteresis the verdict.
+  const auto o = diagnose_data("idle_loop_faster_g", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "resonance") << o.summary;
+  for (const auto& e : r.mixture) EXPECT_NE(e.kind, EffectKind::hysteresis) << o.summary;
+  const auto loop = std::find_if(r.candidates.begin(), r.candidates.end(),
+                                 [](const auto& c) { return c.effect.kind == EffectKind::hysteresis; });
+  ASSERT_NE(loop, r.candidates.end());
+  ASSERT_TRUE(loop->fitted) << o.summary;
+  const control::diagnosis::DiagnosisOptions defaults;
+  EXPECT_GE(loop->time_scale, 1.0 / (1.0 + defaults.time_scale_tolerance) - 1e-9) << o.summary;
+  // The fitted mode lies above 400 Hz: the augmented model's sim runs at the recordings' 10 kHz, not the
+  // default 1 kHz, at which its file was refused and not written.
+  EXPECT_GT(r.mixture.front().p[0], 400.0) << o.summary;
+  EXPECT_NE(read(o.augmented_model_path).find("[controller]\nperiod_s = 0.0001\n"), std::string::npos);
+}
+
 TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
