@@ -265,7 +265,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
               {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true}};
     case EffectKind::slew_limit:
       // From a slow amplifier to one that moves the whole recorded span in a tenth of a sample.
-      return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, rel(span / Ts, {0.002, 0.01, 0.05, 0.2})}};
+      // digital: 0 an analog amplifier ramping inside the sample, 1 a digital limiter on the held command
+      // (a form fitted in a space of its own, like slow_pole_only).
+      return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, rel(span / Ts, {0.002, 0.01, 0.05, 0.2})},
+              {"digital", 0.0, 1.0, false, {0.0}, 0.0, true}};
     case EffectKind::resonance: {
       const double f_max = 0.4 / Ts;
       std::vector<double> starts;
@@ -329,7 +332,8 @@ std::string_view physical_meaning(EffectKind kind) noexcept {
       return "asymmetric dynamics: relaxation (displacement falling toward its target) runs at a different "
              "speed than contraction";
     case EffectKind::slew_limit:
-      return "slew limit: the amplifier cannot charge the actuator's capacitance faster than a fixed rate";
+      return "slew limit: the drive cannot change faster than a fixed rate (an analog amplifier charging the "
+             "actuator's capacitance, or a digital limiter on the command)";
     case EffectKind::resonance: return "a structural resonance (mass-spring mode): in series behind the gel dynamics, or driven beside them by the actuator force (parallel share)";
     case EffectKind::drift:
       return "input-independent drift (thermal or sensor): a slow offset that does not depend on the voltage, "
@@ -351,6 +355,10 @@ void validate(const Effect& e, double Ts, const std::string& key) {
   }
   if (e.kind == EffectKind::saturation && e.p[2] != 0.0 && e.p[2] != 1.0)
     throw ConfigError(key + ".on_drive", format("must be 0 (on the displacement) or 1 (on the drive), got %g", e.p[2]));
+  if (e.kind == EffectKind::slew_limit && e.p[1] != 0.0 && e.p[1] != 1.0)
+    throw ConfigError(key + ".digital",
+                      format("must be 0 (an analog amplifier ramping inside the sample) or 1 (a digital limiter on the held "
+                             "command), got %g", e.p[1]));
   if (const auto at = slow_pole_only_index(e.kind); at && e.p[*at] != 0.0 && e.p[*at] != 1.0)
     throw ConfigError(key + ".slow_pole_only",
                       format("must be 0 (all of G's time constants) or 1 (G's slowest pole alone), got %g", e.p[*at]));
@@ -524,9 +532,8 @@ void AugmentedPlant::reset_steady_state(double u) noexcept {
 
 double AugmentedPlant::input_stage(double x) noexcept {
   if (has(EffectKind::slew_limit)) {
-    // The amplifier ramps at the slew rate inside the sample: hold its mean over the sample.
     const double cap = p(EffectKind::slew_limit)[0] * Ts_, e = x - slew_state_;
-    x = slew_state_ + slew_mean_offset(e, cap);
+    x = slew_state_ + slew_mean_offset(e, cap, p(EffectKind::slew_limit)[1] != 0.0);
     slew_state_ += slew_state_step(e, cap);
   }
   if (has(EffectKind::dead_zone)) x = dead_zone(x, p(EffectKind::dead_zone)[0], p(EffectKind::dead_zone)[1]);

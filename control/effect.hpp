@@ -191,10 +191,12 @@ inline double soft_saturation_slope(double y, const std::array<double, kMaxEffec
   return excess > 0.0 ? 1.0 / ((1.0 + r2) * std::sqrt(1.0 + r2)) : 1.0;
 }
 
-/// The slew-limit effect over one sample: the amplifier ramps from its state
-/// toward the command (difference e) at most `cap` volts per sample; returns
-/// the mean over the sample relative to the state (what the gel sees).
-inline double slew_mean_offset(double e_V, double cap_V) noexcept {
+/// The slew-limit effect over one sample: the drive moves from its state toward
+/// the command (difference e) at most `cap` volts per sample; returns what the
+/// gel sees over the sample relative to the state. An analog amplifier ramps
+/// inside the sample (its mean); a digital limiter holds the limited step.
+inline double slew_mean_offset(double e_V, double cap_V, bool digital) noexcept {
+  if (digital) return std::clamp(e_V, -cap_V, cap_V);
   return std::abs(e_V) <= cap_V ? e_V - 0.5 * e_V * std::abs(e_V) / cap_V : std::copysign(0.5 * cap_V, e_V);
 }
 /// ... and the state's move over the sample.

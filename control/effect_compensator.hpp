@@ -143,6 +143,7 @@ class EffectCompensator final {
   [[nodiscard]] const std::array<double, kMaxEffectParams>& p(EffectKind k) const noexcept {
     return p_[static_cast<size_t>(k)];
   }
+  [[nodiscard]] bool slew_digital() const noexcept { return p(EffectKind::slew_limit)[1] != 0.0; }
   [[nodiscard]] double slew_forward(double u_V) const noexcept;
   [[nodiscard]] double slew_inverse(double x_V) const noexcept;
   /// The saturation's inverse on a displacement (output side) or a static displacement G(0) w (the drive).

@@ -283,6 +283,22 @@ TEST(AugmentedPlant, SlewLimitRampsTheVoltage) {
   for (size_t k = 0; k < y.size(); ++k) ASSERT_NEAR(y[k], y_ramp[k], 1e-9) << k;
 }
 
+TEST(AugmentedPlant, DigitalSlewLimitHoldsTheLimitedStep) {
+  const Effect e{EffectKind::slew_limit, {1000.0, 1.0}};
+  const auto y = run(e, steps(3000, 200.0, 300.5), 200.0);
+  // The same as the nominal model driven by a held 1 V/sample staircase: 201, 202, ..., 300, then 300.5.
+  std::vector<double> stairs(3000, 300.5);
+  stairs[0] = 200.0;
+  for (size_t k = 1; k <= 100; ++k) stairs[k] = 200.0 + static_cast<double>(k);
+  const auto y_stairs = run({}, stairs, 200.0);
+  for (size_t k = 0; k < y.size(); ++k) ASSERT_NEAR(y[k], y_stairs[k], 1e-9) << k;
+}
+
+TEST(AugmentedPlant, SlewLimitFormIsAnalogOrDigital) {
+  EXPECT_THROW(validate(Effect{EffectKind::slew_limit, {1000.0, 0.5}}, 1e-3, "model.effect[0]"), ConfigError);
+  EXPECT_NO_THROW(validate(Effect{EffectKind::slew_limit, {1000.0, 1.0}}, 1e-3, "model.effect[0]"));
+}
+
 TEST(AugmentedPlant, ResonanceKeepsTheGainAndRingsAtItsFrequency) {
   const Effect e{EffectKind::resonance, {5.0, 0.05}};
   const auto u = steps(20000, 100.0, 300.0);

@@ -99,6 +99,16 @@ TEST(EffectCompensator, SlewLimitOutOfReachGivesTheLargestReachableStep) {
   EXPECT_NEAR(c.effective_input(u), 105.0, 1e-12);  // the mean of a full-rate ramp
 }
 
+TEST(EffectCompensator, DigitalSlewLimitInvertsWithinReachAndClampsBeyond) {
+  auto c = compensator({{EffectKind::slew_limit, {10000.0, 1.0}}});  // 10 V per sample, on the held command
+  c.reset_steady_state(100.0);
+  EXPECT_NEAR(c.effective_input(c.voltage_for(104.0)), 104.0, 1e-12);
+  c.reset_steady_state(100.0);
+  const double u = c.voltage_for(200.0);
+  EXPECT_NEAR(u, 110.0, 1e-12);
+  EXPECT_NEAR(c.effective_input(u), 110.0, 1e-12);  // the whole step, held
+}
+
 /// f(x) = x, G settling within a microsecond.
 const HammersteinModel kUnitModel{OddPolynomial({1.0}), TransferFunction({1.0}, {1e-6, 1.0})};
 

@@ -580,6 +580,19 @@ TEST(DiagnoseIndependentCases, ALoopThatDoesNoWorkDoesNotBuyAFasterG) {
   EXPECT_NE(read(o.augmented_model_path).find("[controller]\nperiod_s = 0.0001\n"), std::string::npos);
 }
 
+TEST(DiagnoseIndependentCases, ADigitalSlewLimitIsFittedAsOne) {
+  // A fresh case of the independent generator (tests/data/digital_slew_limit/README.md): a digital limiter
+  // at 1455 V/s on the held command at 100 Hz. The analog form alone left 88% of the excess and a mode led.
+  const auto o = diagnose_data("digital_slew_limit", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "slew_limit") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::slew_limit) << o.summary;
+  EXPECT_EQ(r.mixture[0].p[1], 1.0) << "digital\n" << o.summary;
+  EXPECT_NEAR(r.mixture[0].p[0], 1455.0, 0.05 * 1455.0) << "slew_rate_V_per_s\n" << o.summary;
+  EXPECT_LE(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // A case of the independent generator (tests/data/fractional_delay/README.md): 0.5 samples of transport
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
