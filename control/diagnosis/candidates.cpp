@@ -291,7 +291,7 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
 /// piezo, was called hysteresis so: alpha -1.2e-4 with G 0.65x as fast, the loop's share of the fit 1e-4.
 bool loop_idles(const CandidateResult& c, Problem& problem, const std::vector<Series>& data,
                 const std::vector<std::vector<char>>& held_out, const DiagnosisOptions& o) {
-  if (c.effect.kind != EffectKind::hysteresis || c.time_scale >= 1.0 / (1.0 + o.time_scale_tolerance)) return false;
+  if (c.effect.kind != EffectKind::hysteresis || c.time_scale >= time_scale_bounds(o).first) return false;
   std::vector<Effect> without{c.effect};
   without[0].p[0] = 0.0;  // alpha
   const double mse_without = std::pow(errors_of(data, problem.predict(without, nominal_of(c), true).y, held_out).rmse_fit_um, 2);
@@ -303,7 +303,7 @@ bool loop_idles(const CandidateResult& c, Problem& problem, const std::vector<Se
 void refit_loop_at_ordinary_time_scale(CandidateResult& c, std::vector<FitSpace> spaces, const std::vector<StartFit>& best,
                                        const std::vector<std::vector<char>>& held_out, Problem& problem,
                                        const std::vector<Series>& data, const DiagnosisOptions& o) {
-  const double lowest = 1.0 / (1.0 + o.time_scale_tolerance);
+  const double lowest = time_scale_bounds(o).first;
   std::vector<StartFit> refits;
   for (size_t v = 0; v < spaces.size(); ++v) {
     spaces[v].specs[spaces[v].specs.size() - kNominalParams].lower = lowest;

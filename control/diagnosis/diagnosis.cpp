@@ -285,8 +285,7 @@ std::vector<std::string> refit_at_bounds(const NominalRefit& r, const DiagnosisO
   const auto at = [](double v, double lo, double hi, double nominal) {
     return std::abs(v - lo) <= 0.01 * (nominal - lo) || std::abs(hi - v) <= 0.01 * (hi - nominal);
   };
-  const double t = 1.0 + o.time_scale_tolerance;
-  const double t_lo = with_loop ? std::min(o.hysteresis_time_scale_min, 1.0 / t) : 1.0 / t;
+  const auto [t_lo, t] = time_scale_bounds(o, with_loop);
   std::vector<std::string> names;
   const auto [gain_lo, gain_hi] = gain_bounds(o);
   if (at(r.gain, gain_lo, gain_hi, 1.0)) names.emplace_back("gain");
@@ -304,6 +303,11 @@ std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& o) {
 
 std::pair<double, double> gain_bounds(const DiagnosisOptions& o) {
   return {1.0 / (1.0 + o.gain_tolerance), 1.0 + o.gain_tolerance};
+}
+
+std::pair<double, double> time_scale_bounds(const DiagnosisOptions& o, bool with_loop) {
+  const double t = 1.0 + o.time_scale_tolerance;
+  return {with_loop ? std::min(o.hysteresis_time_scale_min, 1.0 / t) : 1.0 / t, t};
 }
 
 DiagnosisOptions widened_tolerances(DiagnosisOptions o) {

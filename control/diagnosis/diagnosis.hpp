@@ -303,6 +303,10 @@ std::pair<double, double> poly_shape_bounds(const DiagnosisOptions& options);
 /// The overall gain's bounds of the refit: [1 / (1 + tol), 1 + tol].
 std::pair<double, double> gain_bounds(const DiagnosisOptions& options);
 
+/// G's time-scale bounds of the refit: [1 / (1 + tol), 1 + tol]; `with_loop`, the lower one down to
+/// DiagnosisOptions::hysteresis_time_scale_min.
+std::pair<double, double> time_scale_bounds(const DiagnosisOptions& options, bool with_loop = false);
+
 /// Simulates `model` (with `effect`) from each recording's u, output error,
 /// from rest at the voltage whose steady state matches the mean of the first
 /// 10 measured samples (the recording's initial state; for an open-loop

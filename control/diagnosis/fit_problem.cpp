@@ -52,10 +52,9 @@ FitSpace::FitSpace(std::vector<EffectKind> k, const DataScale& d, bool with_nomi
   // fresh drift set case003), which the augmented model then added to the rig's output.
   hold(EffectKind::drift, 0, 0.0);
   if (time_scale) {
-    const double t = o.time_scale_tolerance;
     const bool loop = std::find(kinds.begin(), kinds.end(), EffectKind::hysteresis) != kinds.end();
-    specs.push_back({"time_scale", loop ? std::min(o.hysteresis_time_scale_min, 1.0 / (1.0 + t)) : 1.0 / (1.0 + t), 1.0 + t,
-                     true, {1.0}});
+    const auto [time_lo, time_hi] = time_scale_bounds(o, loop);
+    specs.push_back({"time_scale", time_lo, time_hi, true, {1.0}});
     const auto [shape_lo, shape_hi] = poly_shape_bounds(o);
     specs.push_back({"poly_shape", shape_lo, shape_hi, false, {1.0}});
     // The next odd term, as its slope at the largest recorded |u| over f's mean slope f(u)/u there:
