@@ -27,9 +27,40 @@ std::vector<double> add_polynomials(std::vector<double> a, std::vector<double> b
 
 std::vector<std::pair<double, double>> creep_branches(const std::array<double, kMaxEffectParams>& p);
 
+namespace {
+
+/// The parameters that choose between two forms of an effect (0 or 1, fitted each in a space of its own):
+/// where each sits and what its two values mean.
+struct FormFlag {
+  EffectKind kind;
+  size_t index;
+  const char* when_0;
+  const char* when_1;
+};
+
+constexpr std::array kFormFlags{
+    FormFlag{EffectKind::saturation, 2, "on the displacement", "on the drive"},
+    FormFlag{EffectKind::slew_limit, 1, "an analog amplifier ramping inside the sample",
+             "a digital limiter on the held command"},
+    FormFlag{EffectKind::asymmetric_dynamics, 1, "all of G's time constants", "G's slowest pole alone"},
+    FormFlag{EffectKind::bias_dependent_dynamics, 4, "all of G's time constants", "G's slowest pole alone"},
+};
+
+const FormFlag* form_flag(EffectKind kind) noexcept {
+  for (const auto& flag : kFormFlags)
+    if (flag.kind == kind) return &flag;
+  return nullptr;
+}
+
+}  // namespace
+
+std::optional<size_t> form_flag_index(EffectKind kind) noexcept {
+  if (const auto* flag = form_flag(kind)) return flag->index;
+  return std::nullopt;
+}
+
 std::optional<size_t> slow_pole_only_index(EffectKind kind) noexcept {
-  if (kind == EffectKind::asymmetric_dynamics) return 1;
-  if (kind == EffectKind::bias_dependent_dynamics) return 4;
+  if (kind == EffectKind::asymmetric_dynamics || kind == EffectKind::bias_dependent_dynamics) return form_flag_index(kind);
   return std::nullopt;
 }
 
@@ -353,15 +384,9 @@ void validate(const Effect& e, double Ts, const std::string& key) {
     if (!std::isfinite(e.p[i]) || e.p[i] < lower || e.p[i] > upper)
       throw ConfigError(key + "." + big[i].name, format("must be in [%g, %g], got %g", lower, upper, e.p[i]));
   }
-  if (e.kind == EffectKind::saturation && e.p[2] != 0.0 && e.p[2] != 1.0)
-    throw ConfigError(key + ".on_drive", format("must be 0 (on the displacement) or 1 (on the drive), got %g", e.p[2]));
-  if (e.kind == EffectKind::slew_limit && e.p[1] != 0.0 && e.p[1] != 1.0)
-    throw ConfigError(key + ".digital",
-                      format("must be 0 (an analog amplifier ramping inside the sample) or 1 (a digital limiter on the held "
-                             "command), got %g", e.p[1]));
-  if (const auto at = slow_pole_only_index(e.kind); at && e.p[*at] != 0.0 && e.p[*at] != 1.0)
-    throw ConfigError(key + ".slow_pole_only",
-                      format("must be 0 (all of G's time constants) or 1 (G's slowest pole alone), got %g", e.p[*at]));
+  if (const auto* flag = form_flag(e.kind); flag && e.p[flag->index] != 0.0 && e.p[flag->index] != 1.0)
+    throw ConfigError(key + "." + big[flag->index].name,
+                      format("must be 0 (%s) or 1 (%s), got %g", flag->when_0, flag->when_1, e.p[flag->index]));
 }
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {

@@ -223,6 +223,10 @@ std::vector<std::pair<double, double>> creep_branches(const std::array<double, k
 /// move it alone (slow_pole_only).
 bool slowest_pole_is_real(const TransferFunction& G);
 
+/// Where `kind` keeps the parameter that chooses between its two forms (0 or 1: saturation's on_drive,
+/// slew_limit's digital, slow_pole_only), if it has one.
+std::optional<size_t> form_flag_index(EffectKind kind) noexcept;
+
 /// Where `kind` keeps its slow_pole_only choice (asymmetric and bias-dependent dynamics), if it has one.
 std::optional<size_t> slow_pole_only_index(EffectKind kind) noexcept;
 

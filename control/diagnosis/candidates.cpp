@@ -178,9 +178,7 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
 
 /// The parameter that chooses between forms fitted in spaces of their own (candidate_spaces), if any.
 std::optional<size_t> form_choice(EffectKind kind) {
-  if (kind == EffectKind::saturation) return 2;               // on_drive
-  if (kind == EffectKind::slew_limit) return 1;               // digital
-  if (const auto at = slow_pole_only_index(kind)) return at;
+  if (const auto at = form_flag_index(kind)) return at;
   if (kind == EffectKind::drift) return kDriftWander;
   return std::nullopt;
 }

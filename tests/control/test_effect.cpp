@@ -203,6 +203,37 @@ TEST(Effect, ASaturationIsOnTheDisplacementOrOnTheDriveNothingBetween) {
   }
 }
 
+TEST(Effect, EveryFormChoiceIsZeroOrOneAndTheErrorNamesIt) {
+  struct Case {
+    EffectKind kind;
+    size_t index;
+    const char* name;
+  };
+  for (const auto& [kind, index, name] : {Case{EffectKind::saturation, 2, "on_drive"}, Case{EffectKind::slew_limit, 1, "digital"},
+                                          Case{EffectKind::asymmetric_dynamics, 1, "slow_pole_only"},
+                                          Case{EffectKind::bias_dependent_dynamics, 4, "slow_pole_only"}}) {
+    ASSERT_EQ(form_flag_index(kind), index) << to_string(kind);
+    Effect e{kind, {}};
+    const auto specs = parameter_specs(kind, DataScale::unbounded(Ts));
+    for (size_t i = 0; i < specs.size(); ++i)  // a valid value for each: its default where it has one
+      e.p[i] = std::isfinite(specs[i].default_value) ? specs[i].default_value : specs[i].lower;
+    for (double value : {0.0, 1.0}) {
+      e.p[index] = value;
+      EXPECT_NO_THROW(validate(e, Ts, "e")) << to_string(kind) << " " << value;
+    }
+    e.p[index] = 0.5;
+    try {
+      validate(e, Ts, "e");
+      ADD_FAILURE() << to_string(kind) << "." << name << " = 0.5 accepted";
+    } catch (const ConfigError& error) {
+      EXPECT_EQ(error.key(), std::string("e.") + name);
+      EXPECT_NE(std::string(error.what()).find("got 0.5"), std::string::npos) << error.what();
+    }
+  }
+  EXPECT_FALSE(form_flag_index(EffectKind::hysteresis));
+  EXPECT_FALSE(form_flag_index(EffectKind::creep));
+}
+
 TEST(DataScale, TheValueNearestZeroIsTheRangesNearEndOrZeroWhenItCrossesZero) {
   EXPECT_EQ(abs_nearest_zero(324.0, 456.0), 324.0);
   EXPECT_EQ(abs_nearest_zero(-456.0, -324.0), 324.0);
