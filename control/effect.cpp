@@ -54,6 +54,20 @@ const FormFlag* form_flag(EffectKind kind) noexcept {
 
 }  // namespace
 
+std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs) {
+  std::string s;
+  for (size_t i = 0; i < specs.size(); ++i) s += (i ? ", " : "") + specs[i].name + " = " + format("%.4g", e.p[i]);
+  return s;
+}
+
+Effect with_displacement_scaled(const Effect& e, double factor) {
+  Effect out = e;
+  const auto specs = parameter_specs(e.kind, DataScale::unbounded(1.0));
+  for (size_t i = 0; i < specs.size(); ++i)
+    if (specs[i].name.find("_um") != std::string::npos) out.p[i] *= factor;
+  return out;
+}
+
 std::optional<size_t> form_flag_index(EffectKind kind) noexcept {
   if (const auto* flag = form_flag(kind)) return flag->index;
   return std::nullopt;

@@ -223,6 +223,14 @@ std::vector<std::pair<double, double>> creep_branches(const std::array<double, k
 /// move it alone (slow_pole_only).
 bool slowest_pole_is_real(const TransferFunction& G);
 
+/// "name = value, ..." of an effect's parameters (`specs` its parameter_specs), four digits each.
+std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs);
+
+/// The same effect on a plant whose displacement is `factor` times as large (a gain folded into f): its
+/// parameters in displacement units (named *_um*: a saturation's knee, softness and centre, a drift, the
+/// bias-dependent dynamics' reference) scale by `factor`, the others (volts, seconds, shares) stay.
+Effect with_displacement_scaled(const Effect& e, double factor);
+
 /// Where `kind` keeps the parameter that chooses between its two forms (0 or 1: saturation's on_drive,
 /// slew_limit's digital, slow_pole_only), if it has one.
 std::optional<size_t> form_flag_index(EffectKind kind) noexcept;

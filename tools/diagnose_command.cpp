@@ -96,7 +96,8 @@ size_t stride(size_t n) { return std::max<size_t>(1, n / 6000); }
 
 std::string effect_params_json(const CandidateResult& c) {
   std::string s = "{";
-  for (size_t i = 0; i < c.specs.size(); ++i) s += (i ? ", " : "") + quoted(c.specs[i].name) + ": " + number_or_null(c.effect.p[i]);
+  const Effect e = c.in_recorded_units();
+  for (size_t i = 0; i < c.specs.size(); ++i) s += (i ? ", " : "") + quoted(c.specs[i].name) + ": " + number_or_null(e.p[i]);
   return s + "}";
 }
 
@@ -241,9 +242,7 @@ std::string report_markdown(const DiagnosisResult& r, const std::vector<std::str
      << "![residual vs regime](residual_vs_regime.png)\n\n## Candidates (best first)\n\n";
   md << "| effect | parameters | evidence R2 | fit RMSE (um) | held-out RMSE (um) |\n|---|---|---|---|---|\n";
   for (const auto& c : r.candidates) {
-    std::string p;
-    for (size_t i = 0; i < c.specs.size(); ++i) p += (i ? ", " : "") + c.specs[i].name + " = " + number_or_null(c.effect.p[i], "%.4g");
-    md << "| " << to_string(c.effect.kind) << " | " << p << " | " << number_or_null(c.evidence_r2, "%.3f") << " | "
+    md << "| " << to_string(c.effect.kind) << " | " << parameters_text(c.in_recorded_units(), c.specs) << " | " << number_or_null(c.evidence_r2, "%.3f") << " | "
        << (c.fitted ? number_or_null(c.errors.rmse_fit_um, "%.4f") : "-") << " | " << (c.fitted ? number_or_null(c.errors.rmse_validation_um, "%.4f") : "-")
        << " |\n";
   }
@@ -357,11 +356,14 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
     s << "# io_delay_samples: not declared in the model file; estimated " << number_or_null(r.alignment.io_delay_samples, "%.3g")
       << " samples from the data (rounded here).\n";
   if (!lm.other_tables.empty()) s << "# The model file's other tables follow [model] unchanged.\n";
+  // With the gain in f, the effects' parameters in um scale with it (those in V, s or shares do not).
+  std::vector<Effect> effects;
+  for (const auto& e : r.mixture) effects.push_back(with_displacement_scaled(e, nr.gain));
   const std::string model_keys = "poly = " + toml_array(poly) + "\nG_num = " + toml_array(refit.G.num()) +
                                  "\nG_den = " + toml_array(refit.G.den()) + "\n";
   s << "\n[model]\n" << model_keys << "io_delay_samples = " << io << "\n";
   if (r.mixture.empty()) s << "\n# No effect to compensate (verdict: " << r.verdict << ").\n";
-  s << effect_tables_toml(r.mixture, "model.effect") << "\n";
+  s << effect_tables_toml(effects, "model.effect") << "\n";
   if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
   if (lm.other_tables.find("[controller]") == std::string::npos) {
     // The loop, and so the sim backend, at the recordings' period: io_delay_samples counts in it, and a
@@ -380,7 +382,7 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
     << "[sim.hysteresis]\nenabled = false\n\n[sim.creep]\nenabled = false\n\n";
   s << "[sim.truth]\n" << model_keys;
   if (r.mixture.empty()) s << "\n# No effect added (verdict: " << r.verdict << ").\n";
-  s << effect_tables_toml(r.mixture, "sim.truth.effect");
+  s << effect_tables_toml(effects, "sim.truth.effect");
   return s.str();
 }
 
@@ -419,6 +421,7 @@ std::string extension_json(const DiagnosisResult& r) {
   for (size_t i = 0; i < r.mixture.size(); ++i) {
     CandidateResult c;
     c.effect = r.mixture[i];
+    c.gain = r.nominal_refit.gain;
     c.specs = parameter_specs(c.effect.kind, DataScale::unbounded(1e-3));
     j << (i ? ", " : "") << "{\"name\": " << quoted(std::string(to_string(c.effect.kind))) << ", \"params\": " << effect_params_json(c)
       << ", \"heldout_mse_removed_um2\": " << number_or_null(i < r.contribution.size() ? r.contribution[i] : NAN) << "}";

@@ -114,6 +114,8 @@ struct ModelErrors {
 
 /// One fitted candidate.
 struct CandidateResult {
+  /// As fitted: on the nominal's displacement before the refit's gain (its parameters in um are in those
+  /// units); in_recorded_units() gives them as the recordings measure them.
   Effect effect;
   std::vector<ParameterSpec> specs;
   double evidence_r2 = 0.0;  ///< share of the fit-segment residual variance its best coarse-grid member explains
@@ -127,6 +129,9 @@ struct CandidateResult {
   double score = 0.0;        ///< penalised validation MSE (lower is better)
   double time_scale = 1.0, poly_shape = 1.0, gain = 1.0;  ///< the nominal refit fitted jointly with it
   double poly_next = 0.0;  ///< f's added term, as its slope share (see DiagnosisOptions::poly_next_tolerance)
+  /// The effect on the displacement the recordings measure: the refit's gain folded in (the form the
+  /// report and the augmented model, whose f carries that gain, give it in).
+  [[nodiscard]] Effect in_recorded_units() const { return with_displacement_scaled(effect, gain); }
   /// A loop's start per recording (AugmentedPlant::set_loop_memory: 0 virgin, +1 rising, -1 falling branch,
   /// between: partway, by a step of that share of the widest play),
   /// a nuisance chosen with the loop's fit; empty for the other candidates.

@@ -487,12 +487,6 @@ ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::ve
   return {std::sqrt(all.mse()), std::sqrt(fit.mse()), std::sqrt(val.mse())};
 }
 
-std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs) {
-  std::string s;
-  for (size_t i = 0; i < specs.size(); ++i) s += (i ? ", " : "") + specs[i].name + " = " + format("%.4g", e.p[i]);
-  return s;
-}
-
 DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal,
                      const std::vector<std::vector<char>>& held_out) {
   DataScale d;

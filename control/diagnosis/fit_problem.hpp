@@ -311,9 +311,6 @@ Eigen::VectorXd fit_staged(Problem& problem, const FitSpace& c, Eigen::VectorXd 
 ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
                       const std::vector<std::vector<char>>& held_out);
 
-/// "name = value, ..." of an effect's parameters.
-std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs);
-
 /// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
 DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal,
                      const std::vector<std::vector<char>>& held_out);

@@ -124,7 +124,7 @@ std::string loop_start_text(const CandidateResult& c) {
 /// The text of every candidate: what it means physically, its fitted parameters and what it does to the held-out error.
 void explain_candidates(DiagnosisResult& res) {
   for (auto& c : res.candidates)
-    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.effect, c.specs) +
+    c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.in_recorded_units(), c.specs) +
                     (c.fitted ? " (G time scale " + format("%.3g", c.time_scale) + ", gain " + format("%.3g", c.gain) +
                                     loop_start_text(c) + "); validation RMSE " +
                                     format("%.3g", res.nominal_refit.errors.rmse_validation_um) + " -> " +

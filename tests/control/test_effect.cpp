@@ -234,6 +234,21 @@ TEST(Effect, EveryFormChoiceIsZeroOrOneAndTheErrorNamesIt) {
   EXPECT_FALSE(form_flag_index(EffectKind::creep));
 }
 
+TEST(Effect, ScalingTheDisplacementScalesOnlyTheParametersInMicrometres) {
+  const Effect saturation{EffectKind::saturation, {40.0, 8.0, 1.0, -3.0}};
+  EXPECT_EQ(with_displacement_scaled(saturation, 0.5).p, (std::array<double, kMaxEffectParams>{20.0, 4.0, 1.0, -1.5}));
+  const Effect drift{EffectKind::drift, {2.0, 0.1, 5.0, 30.0, 0.0}};
+  const auto scaled_drift = with_displacement_scaled(drift, 2.0).p;
+  EXPECT_EQ(scaled_drift[0], 4.0);   // offset_um
+  EXPECT_EQ(scaled_drift[1], 0.2);   // rate_um_per_s
+  EXPECT_EQ(scaled_drift[2], 5.0);   // onset in s
+  const Effect bias{EffectKind::bias_dependent_dynamics, {0.3, 0.5, 120.0, 0.1, 1.0}};
+  EXPECT_EQ(with_displacement_scaled(bias, 0.8).p[2], 96.0);  // reference_um; beta, tau, amplitude_beta, the form stay
+  EXPECT_EQ(with_displacement_scaled(bias, 0.8).p[0], 0.3);
+  const Effect loop{EffectKind::hysteresis, {0.1, 20.0, 0.5}};
+  EXPECT_EQ(with_displacement_scaled(loop, 0.8).p, loop.p);  // volts and shares
+}
+
 TEST(DataScale, TheValueNearestZeroIsTheRangesNearEndOrZeroWhenItCrossesZero) {
   EXPECT_EQ(abs_nearest_zero(324.0, 456.0), 324.0);
   EXPECT_EQ(abs_nearest_zero(-456.0, -324.0), 324.0);

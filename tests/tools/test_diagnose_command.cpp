@@ -60,17 +60,52 @@ void write_recording(const fs::path& p, const Series& s, long nan_rows_at_end = 
 
 const char* kModelN3 = "[model]\npoly = [0.0721, 2.1307e-5, -1.7231e-11]\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n";
 
+/// Quiet arguments for dir's model.toml and rec.csv, the JSON to dir/report.json.
+DiagnoseArgs args_in(const fs::path& dir) {
+  DiagnoseArgs a;
+  a.model = (dir / "model.toml").string();
+  a.recordings = {(dir / "rec.csv").string()};
+  a.json = (dir / "report.json").string();
+  a.quiet = true;
+  return a;
+}
+
+/// How far the sim rig the augmented model configures runs from the diagnosed model (`nominal` with the
+/// refit and the effects), and how far that model runs from the diagnosis's fitted prediction after 10 s
+/// (the diagnosis starts from the rest state the first samples imply: equal after its transient).
+std::pair<double, double> augmented_model_gaps(const DiagnoseOutcome& o, const control::SimRigConfig& sim_cfg,
+                                               const control::HammersteinModel& nominal, const Series& s) {
+  auto sim = sim_cfg;
+  sim.noise_sigma_um = sim.quantization_um = 0.0;
+  control::SimulatedRig rig(sim);
+  // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effects.
+  const auto& nr = o.result.nominal_refit;
+  auto truth = refit_model(nominal, nr.time_scale, nr.poly_shape, nr.poly_next);
+  auto poly = truth.f.coefficients();
+  for (double& coefficient : poly) coefficient *= nr.gain;
+  truth.f = control::OddPolynomial(poly);
+  EXPECT_EQ(sim_cfg.io_delay_samples, std::lround(o.result.alignment.used_samples));
+  AugmentedPlant plant(truth, sim_cfg.io_delay_samples, s.sample_time_s, sim_cfg.added_effects);
+  const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
+  const double offset_um = o.result.alignment.offset_um[0];  // the fitted prediction carries the sensor offset
+  rig.reset_steady_state(s.u_V[0]);
+  double worst_rig = 0.0, worst_prediction = 0.0;
+  for (size_t k = 0; k < s.u_V.size(); ++k) {
+    worst_rig = std::max(worst_rig, std::abs(rig.true_displacement_um() - y_model[k]));
+    if (s.t_s[k] > 10.0)
+      worst_prediction = std::max(worst_prediction, std::abs(y_model[k] + offset_um - o.result.y_fitted_um[0][k]));
+    rig.apply(s.u_V[k]);
+  }
+  return {worst_rig, worst_prediction};
+}
+
 TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   const auto dir = temp_dir("e2e");
   const auto c = generate_case(control::paper_model(3), EffectKind::creep, 5);
   write_recording(dir / "rec.csv", c.recordings[0], 3);
   write(dir / "model.toml", kModelN3);
-  DiagnoseArgs a;
-  a.model = (dir / "model.toml").string();
-  a.recordings = {(dir / "rec.csv").string()};
-  a.json = (dir / "report.json").string();
+  auto a = args_in(dir);
   a.predict = (dir / "pred").string();
-  a.quiet = true;
   a.progress = true;
   testing::internal::CaptureStderr();
   const auto o = run_diagnose(a);
@@ -112,32 +147,41 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   EXPECT_EQ(controller_model.f.coefficients(), sim_cfg.truth.f.coefficients());
   EXPECT_EQ(controller_model.G.den(), sim_cfg.truth.G.den());
   EXPECT_EQ(model_table.integer("io_delay_samples", -1), sim_cfg.io_delay_samples);
-  auto sim = sim_cfg;
-  sim.noise_sigma_um = sim.quantization_um = 0.0;
-  control::SimulatedRig rig(sim);
-  const auto& s = c.recordings[0];
-  // The truth it writes is the model with the nuisance refit (gain, G's time scale) plus the effect.
-  auto truth = refit_model(control::paper_model(3), o.result.nominal_refit.time_scale, o.result.nominal_refit.poly_shape,
-                           o.result.nominal_refit.poly_next);
-  auto poly = truth.f.coefficients();
-  for (double& coefficient : poly) coefficient *= o.result.nominal_refit.gain;
-  truth.f = control::OddPolynomial(poly);
-  ASSERT_EQ(sim_cfg.io_delay_samples, std::lround(o.result.alignment.used_samples));
-  AugmentedPlant plant(truth, sim_cfg.io_delay_samples, s.sample_time_s, o.result.effect);
-  const auto y_model = plant.simulate(s.u_V, s.u_V[0]);
-  const double offset_um = o.result.alignment.offset_um[0];
-  rig.reset_steady_state(s.u_V[0]);
-  double worst_rig = 0.0, worst_prediction = 0.0;
-  for (size_t k = 0; k < s.u_V.size(); ++k) {
-    worst_rig = std::max(worst_rig, std::abs(rig.true_displacement_um() - y_model[k]));
-    // The diagnosis starts from the rest state the first samples imply: equal after its transient.
-    // The fitted prediction also carries the sensor offset.
-    if (s.t_s[k] > 10.0)
-      worst_prediction = std::max(worst_prediction, std::abs(y_model[k] + offset_um - o.result.y_fitted_um[0][k]));
-    rig.apply(s.u_V[k]);
-  }
+  const auto [worst_rig, worst_prediction] = augmented_model_gaps(o, sim_cfg, control::paper_model(3), c.recordings[0]);
   EXPECT_LT(worst_rig, 1e-5) << "the sim rig must run the diagnosed model (parameters written with 8 digits)";
   EXPECT_LT(worst_prediction, 0.03);
+}
+
+TEST(DiagnoseCommand, TheAugmentedModelScalesAnEffectInMicrometresWithTheGainItFoldsIntoF) {
+  // The model file's f is 1.15x the rig's: the refit's gain (~0.87) goes into the augmented model's f, so a
+  // saturation's knee, fitted on the nominal's displacement before that gain, must shrink with it. Written
+  // as fitted, the augmented model ran 0.21 um from the fitted prediction here.
+  const auto dir = temp_dir("gain");
+  const auto c = generate_case(control::paper_model(3), EffectKind::saturation, 5);
+  write_recording(dir / "rec.csv", c.recordings[0]);
+  auto nominal = control::paper_model(3);
+  auto poly = nominal.f.coefficients();
+  for (double& coefficient : poly) coefficient *= 1.15;
+  nominal.f = control::OddPolynomial(poly);
+  write(dir / "model.toml", "[model]\npoly = " + format("[%.9g, %.9g, %.9g]", poly[0], poly[1], poly[2]) +
+                                "\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n");
+  const auto a = args_in(dir);
+  const auto o = run_diagnose(a);
+  ASSERT_EQ(o.result.verdict, "saturation") << o.summary;
+  const double gain = o.result.nominal_refit.gain;
+  ASSERT_NEAR(gain, 1.0 / 1.15, 0.05);
+  const auto sim_cfg = control::parse_simulated_rig(toml::parse_file(o.augmented_model_path), o.augmented_model_path);
+  ASSERT_EQ(sim_cfg.added_effects.size(), 1u);
+  const auto& written = sim_cfg.added_effects[0];
+  EXPECT_NEAR(written.p[0], gain * o.result.effect.p[0], 1e-6 * written.p[0]);  // knee_um
+  EXPECT_NEAR(written.p[1], gain * o.result.effect.p[1], 1e-6 * written.p[1]);  // softness_um
+  EXPECT_EQ(written.p[2], o.result.effect.p[2]);                                  // on_drive: no unit
+  const auto [worst_rig, worst_prediction] = augmented_model_gaps(o, sim_cfg, nominal, c.recordings[0]);
+  EXPECT_LT(worst_rig, 1e-5);
+  EXPECT_LT(worst_prediction, 0.03);
+  // The report gives the parameters as the augmented model does: in the recordings' micrometres.
+  const auto json = read(a.json);
+  EXPECT_NE(json.find("\"knee_um\": " + format("%.6g", written.p[0])), std::string::npos) << json.substr(0, 2000);
 }
 
 TEST(DiagnoseCommand, ReportHasMarkdownAndPlots) {
@@ -225,11 +269,7 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   std::normal_distribution<double> noise(0.0, 0.02);
   for (double& y : s.y_um) y += noise(rng);
   write_recording(dir / "rec.csv", s);
-  DiagnoseArgs a;
-  a.model = (dir / "model.toml").string();
-  a.recordings = {(dir / "rec.csv").string()};
-  a.json = (dir / "report.json").string();
-  a.quiet = true;
+  const auto a = args_in(dir);
   const auto o = run_diagnose(a);
   EXPECT_EQ(o.result.verdict, "hysteresis") << o.summary;
   const auto json = read(a.json);
