@@ -282,21 +282,24 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
               {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1, 0.3})}};
     case EffectKind::saturation: {
-      const bool bipolar = d.bipolar_stroke();
-      const double near = bipolar ? 0.0 : d.y_abs_nearest_um(), stroke = std::max(y_abs - near, 1e-12);
+      // The knee acts on the nominal's displacement before the nuisance refit's gain: its range and starts
+      // cover that displacement too (a widened gain of 0.27 put it at 3.7x the recorded one).
+      const DataScale m = d.on_model_displacement();
+      const bool bipolar = m.bipolar_stroke();
+      const double reach = m.y_abs_um(), near = bipolar ? 0.0 : m.y_abs_nearest_um(), stroke = std::max(reach - near, 1e-12);
       std::vector<double> stroke_knees{0.0};
       for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
       // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
       // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
       // identified on the same data leaves. on_drive is 0 or 1, not fitted as a number (fixed: a space
       // holds it at its lower bound, 0); diagnose fits each placement in a space of its own.
-      std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * y_abs, false, stroke_knees},
-                                       {"softness_um", 0.05 * y_abs, 1e4 * y_abs, true, rel(stroke, {0.3, 1.5, 5.0, 20.0})},
+      std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * reach, false, stroke_knees},
+                                       {"softness_um", 0.05 * reach, 1e4 * reach, true, rel(stroke, {0.3, 1.5, 5.0, 20.0})},
                                        {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
       // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
       // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
       // no centre to fit there (0, the default; a held one would still count in the penalised score).
-      if (bipolar) specs.push_back({"centre_um", -y_abs, y_abs, false, rel(y_abs, {0.0, -0.5, 0.5}), 0.0});
+      if (bipolar) specs.push_back({"centre_um", -reach, reach, false, rel(reach, {0.0, -0.5, 0.5}), 0.0});
       return specs;
     }
     case EffectKind::delay: {

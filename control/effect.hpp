@@ -107,6 +107,16 @@ struct DataScale {
     return abs_nearest_zero(y_min_um, y_max_um);
   }
   double delay_samples_max = kFittedDelaySamples;  ///< the delay effect's bound, in sample_time_min_s
+  /// The nominal's own displacement under the nuisance refit, before its gain ((y - offset) / gain;
+  /// diagnosis::cover_model_displacement), where a saturation's knee acts; NaN until known.
+  double model_y_min_um = std::numeric_limits<double>::quiet_NaN(), model_y_max_um = std::numeric_limits<double>::quiet_NaN();
+  /// This scale with the stroke widened over the nominal's own displacement (model_y_*), when known.
+  [[nodiscard]] DataScale on_model_displacement() const noexcept {
+    DataScale m = *this;
+    if (model_y_min_um <= model_y_max_um)
+      m.y_min_um = std::min(y_min_um, model_y_min_um), m.y_max_um = std::max(y_max_um, model_y_max_um);
+    return m;
+  }
   /// The |command| nearest zero (0 when the commands cross zero): a closed loop about a bias records no
   /// voltage below hundreds of volts.
   [[nodiscard]] double u_abs_nearest_V() const noexcept {

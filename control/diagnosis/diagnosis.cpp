@@ -397,9 +397,10 @@ PassStart start_pass(const HammersteinModel& model, const std::vector<Series>& d
   DiagnosisResult res;
   hold_out(res, data, o);
   Problem problem(model, data, res.held_out, o);
-  const DataScale scale = align_and_baseline(res, problem, data, o, second);
+  DataScale scale = align_and_baseline(res, problem, data, o, second);
   Nominal k;
   auto refit = refit_and_test(res, problem, data, o, k, narrow);
+  cover_model_displacement(scale, refit);
   const bool none = decide_none(res, refit, o);
   return {std::move(res), std::move(problem), scale, k, std::move(refit), none};
 }

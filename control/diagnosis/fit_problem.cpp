@@ -515,6 +515,18 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
   if (!(d.y_min_um <= d.y_max_um)) d.y_min_um = d.y_max_um = 0.0;  // no samples
   return d;
 }
+void cover_model_displacement(DataScale& d, const Prediction& refit) {
+  if (!(refit.gain > 0.0)) return;
+  d.model_y_min_um = INFINITY, d.model_y_max_um = -INFINITY;
+  for (size_t r = 0; r < refit.y.size(); ++r) {
+    const double offset = r < refit.offset_um.size() ? refit.offset_um[r] : 0.0;
+    for (double y : refit.y[r]) {
+      const double inside = (y - offset) / refit.gain;
+      d.model_y_min_um = std::min(d.model_y_min_um, inside), d.model_y_max_um = std::max(d.model_y_max_um, inside);
+    }
+  }
+}
+
 double fit_mse(Problem& p, std::span<const Effect> e, Nominal k) {
   const auto r = p.residual(e, k);
   return r.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(r.size(), 1));

@@ -311,6 +311,12 @@ Eigen::VectorXd fit_staged(Problem& problem, const FitSpace& c, Eigen::VectorXd 
 ModelErrors errors_of(const std::vector<Series>& data, const std::vector<std::vector<double>>& yhat,
                       const std::vector<std::vector<char>>& held_out);
 
+/// Sets `d`'s model_y range: the nominal's own displacement under the nuisance refit `refit`,
+/// (y - offset) / gain, where a saturation's knee acts, before the refit's gain. A widened gain of 0.27 put it
+/// at 3.7x the recorded displacement, past every knee the recorded range allowed (the knee stopped at its
+/// bound and a dead zone's catch-up took the corner: independent seed 137's case043).
+void cover_model_displacement(DataScale& d, const Prediction& refit);
+
 /// Largest |y| the nominal model reaches on these recordings, and the recorded command range.
 DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vector<double>>& y_nominal,
                      const std::vector<std::vector<char>>& held_out);

@@ -113,6 +113,29 @@ TEST_F(Projection, ANegativeAddedTermLeavesFIncreasingPastTheControllersRangeWit
   EXPECT_LT(*turn, 1.02 * 845.0);  // the limit, not far inside it
 }
 
+TEST(ModelDisplacement, TheSaturationsKneeRangeCoversTheNominalsDisplacementBeforeTheRefitsGain) {
+  // A recorded stroke of 75..125 um read by a refit of gain 0.27 and offset 8 um (independent seed 137's
+  // case043, a widened refit): the nominal's own displacement, where the knee acts, runs 248..433 um.
+  DataScale scale;
+  scale.y_min_um = 70.0, scale.y_max_um = 132.0;
+  const auto before = parameter_specs(EffectKind::saturation, scale);
+  EXPECT_LT(before[0].upper, 300.0);  // the knee's bound from the recorded stroke alone: 264 um
+  Prediction refit;
+  refit.gain = 0.27;
+  refit.offset_um = {8.0};
+  refit.y = {{75.0, 100.0, 125.0}};
+  cover_model_displacement(scale, refit);
+  EXPECT_NEAR(scale.model_y_min_um, (75.0 - 8.0) / 0.27, 1e-9);
+  EXPECT_NEAR(scale.model_y_max_um, (125.0 - 8.0) / 0.27, 1e-9);
+  EXPECT_EQ(scale.y_max_um, 132.0);  // the other effects keep the recorded scale
+  const auto knee = parameter_specs(EffectKind::saturation, scale)[0];
+  EXPECT_GE(knee.upper, 2.0 * scale.model_y_max_um);
+  // Starts near the top of that displacement, where a stroke limit a nominal leaves bends it.
+  EXPECT_TRUE(std::any_of(knee.starts.begin(), knee.starts.end(),
+                          [&](double k) { return k > 0.75 * scale.model_y_max_um && k < scale.model_y_max_um; }));
+  EXPECT_EQ(parameter_specs(EffectKind::drift, scale)[0].upper, 132.0);  // a drift's offset_um bound: the recorded y_abs
+}
+
 TEST(WanderingDrift, TheSplineFollowsASlowWanderThroughTheHeldOutBlocksAndMeasuresItsSize) {
   // 60 s: six 10 s blocks, the last 3 s of each held out. The wander is smooth on the 10 s scale (periods
   // of 90 s and 60 s, 1 um), as a thermal drift; a cubic spline knotted every 10 s follows it to ~0.01 um
