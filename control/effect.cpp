@@ -256,13 +256,73 @@ TransferFunction linear_block(const TransferFunction& G, std::span<const Effect>
   return linear_block(G, has_creep, creep, has_mode, mode);
 }
 
+namespace {
+
+/// `fractions` of `unit`: starting points that scale with the recording.
+std::vector<double> shares_of(double unit, std::initializer_list<double> fractions) {
+  std::vector<double> v;
+  for (double f : fractions) v.push_back(f * unit);
+  return v;
+}
+
+std::vector<ParameterSpec> saturation_specs(const DataScale& d) {
+  // The knee acts on the nominal's displacement before the nuisance refit's gain: its range and starts
+  // cover that displacement too (a widened gain of 0.27 put it at 3.7x the recorded one).
+  const DataScale m = d.on_model_displacement();
+  const bool bipolar = m.bipolar_stroke();
+  const double reach = m.y_abs_um(), near = bipolar ? 0.0 : m.y_abs_nearest_um(), stroke = std::max(reach - near, 1e-12);
+  std::vector<double> stroke_knees{0.0};
+  for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
+  // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
+  // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
+  // identified on the same data leaves. on_drive is 0 or 1, not fitted as a number (fixed: a space
+  // holds it at its lower bound, 0); diagnose fits each placement in a space of its own.
+  std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * reach, false, stroke_knees},
+                                   {"softness_um", 0.05 * reach, 1e4 * reach, true, shares_of(stroke, {0.3, 1.5, 5.0, 20.0})},
+                                   {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
+  // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
+  // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
+  // no centre to fit there (0, the default; a held one would still count in the penalised score).
+  if (bipolar) specs.push_back({"centre_um", -reach, reach, false, shares_of(reach, {0.0, -0.5, 0.5}), 0.0});
+  return specs;
+}
+
+std::vector<ParameterSpec> resonance_specs(double Ts) {
+  const double f_max = 0.4 / Ts;
+  std::vector<double> starts;
+  for (double f : {3.0, 8.0, 16.0, 32.0, 64.0, 150.0, 400.0, 1000.0})
+    if (f < f_max) starts.push_back(f);
+  if (starts.empty()) starts = shares_of(f_max, {0.1, 0.3, 0.8});  // sampled below 7.5 Hz (a slow process rig)
+  return {{"frequency_Hz", std::min(0.5, 0.1 * f_max), f_max, true, starts},
+          // Underdamped enough to peak: an overdamped "mode" low in frequency is a slow lag that passes for creep.
+          {"damping_ratio", 0.005, 0.7, true, {0.05, 0.3}},
+          {"direct_fraction", 0.0, 1.0, false, {0.0, 0.9}, 0.0},
+          {"parallel_fraction", 0.0, 1.0, false, {0.0, 0.1}, 0.0}};
+}
+
+std::vector<ParameterSpec> drift_specs(const DataScale& d) {
+  const double y_abs = d.y_abs_um();
+  const double dur = std::max(d.duration_s, 0.0);
+  // An onset within the last tenth of the fit segment, or after it, leaves a ramp fitted to a few
+  // samples (or none) and extrapolated over the held-out data: a 14 s recording's drift fitted there
+  // at 1.2 um/s, 28x the held-out error.
+  const double onset_max = std::min(dur, 0.9 * d.fit_end_s);
+  return {{"offset_um", -y_abs, y_abs, false, {0.0}},
+          {"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, shares_of(y_abs, {-1e-4, 1e-4})},
+          {"onset_s", 0.0, onset_max, false, {0.0, std::min(0.25 * dur, onset_max), std::min(0.5 * dur, onset_max)}},
+          // Thermal drift settles; a settling time a thousand recordings long is a ramp (0, the
+          // default of older files, is exactly one), a fiftieth of one nearly a step.
+          {"settling_time_s", 0.02 * dur, std::max(1e3 * dur, 1.0), true, {1e3 * dur, 0.3 * dur}, 0.0},
+          // A drift that wanders (a random walk: thermal or sensor) is no function of time a model can
+          // carry; its size is. Not fitted as a number (fixed): diagnose fits such a drift as a smooth
+          // curve through each recording (a space of its own) and sets this from the curve.
+          {"wander_um_per_sqrt_s", 0.0, 10.0 * y_abs, false, {0.0}, 0.0, true}};
+}
+
+}  // namespace
+
 std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) {
   const double Ts = d.sample_time_s, span = d.u_span_V(), u_abs = d.u_abs_V(), y_abs = d.y_abs_um();
-  const auto rel = [](double unit, std::initializer_list<double> fractions) {
-    std::vector<double> v;
-    for (double f : fractions) v.push_back(f * unit);
-    return v;
-  };
   switch (kind) {
     case EffectKind::none: return {};
     case EffectKind::hysteresis:
@@ -271,7 +331,7 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       // loop (the output leads after a reversal), as a loop acting on the displacement side of a Preisach
       // model can be; the independent generator's Preisach loops fitted only with it.
       return {{"alpha", -0.5, 1.0, false, {0.005, 0.02, 0.06, 0.3, -0.02, -0.06}},
-              {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, rel(span, {0.01, 0.03, 0.1, 0.3})},
+              {"threshold_scale_V", 1e-4 * span, 2.0 * span, true, shares_of(span, {0.01, 0.03, 0.1, 0.3})},
               {"threshold_spread", -0.85, 3.0, false, {-0.6, 0.0, 1.0}, 0.0}};
     case EffectKind::creep:
       return {{"fraction", -0.5, 0.5, false, {0.003, -0.003, 0.03, -0.03}},
@@ -279,29 +339,9 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
                {0.5, 2, 8, 30}},
               {"spread_decades", 0.0, 3.0, false, {0.0}, 0.0}};
     case EffectKind::dead_zone:
-      return {{"threshold_V", 0.0, u_abs, false, rel(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
-              {"catch_up_V", 1e-4 * u_abs, u_abs, true, rel(u_abs, {0.005, 0.03, 0.1, 0.3})}};
-    case EffectKind::saturation: {
-      // The knee acts on the nominal's displacement before the nuisance refit's gain: its range and starts
-      // cover that displacement too (a widened gain of 0.27 put it at 3.7x the recorded one).
-      const DataScale m = d.on_model_displacement();
-      const bool bipolar = m.bipolar_stroke();
-      const double reach = m.y_abs_um(), near = bipolar ? 0.0 : m.y_abs_nearest_um(), stroke = std::max(reach - near, 1e-12);
-      std::vector<double> stroke_knees{0.0};
-      for (double share : {0.4, 0.8, 0.92}) stroke_knees.push_back(near + share * stroke);
-      // Knees from the stroke's near end: a stop within the recorded stroke (of a sensor zeroed away from
-      // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
-      // identified on the same data leaves. on_drive is 0 or 1, not fitted as a number (fixed: a space
-      // holds it at its lower bound, 0); diagnose fits each placement in a space of its own.
-      std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * reach, false, stroke_knees},
-                                       {"softness_um", 0.05 * reach, 1e4 * reach, true, rel(stroke, {0.3, 1.5, 5.0, 20.0})},
-                                       {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
-      // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
-      // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
-      // no centre to fit there (0, the default; a held one would still count in the penalised score).
-      if (bipolar) specs.push_back({"centre_um", -reach, reach, false, rel(reach, {0.0, -0.5, 0.5}), 0.0});
-      return specs;
-    }
+      return {{"threshold_V", 0.0, u_abs, false, shares_of(u_abs, {0.003, 0.01, 0.03, 0.08, 0.15})},
+              {"catch_up_V", 1e-4 * u_abs, u_abs, true, shares_of(u_abs, {0.005, 0.03, 0.1, 0.3})}};
+    case EffectKind::saturation: return saturation_specs(d);
     case EffectKind::delay: {
       const double Tf = d.sample_time_min_s > 0.0 ? std::min(d.sample_time_min_s, Ts) : Ts;
       return {{"extra_delay_s", 0.0, d.delay_samples_max * Tf, false, {0.5 * Ts, 1 * Ts, 2 * Ts, 4 * Ts, 8 * Ts, 16 * Ts}}};
@@ -315,37 +355,10 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       // From a slow amplifier to one that moves the whole recorded span in a tenth of a sample.
       // digital: 0 an analog amplifier ramping inside the sample, 1 a digital limiter on the held command
       // (a form fitted in a space of its own, like slow_pole_only).
-      return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, rel(span / Ts, {0.002, 0.01, 0.05, 0.2})},
+      return {{"slew_rate_V_per_s", 1e-5 * span / Ts, 10.0 * span / Ts, true, shares_of(span / Ts, {0.002, 0.01, 0.05, 0.2})},
               {"digital", 0.0, 1.0, false, {0.0}, 0.0, true}};
-    case EffectKind::resonance: {
-      const double f_max = 0.4 / Ts;
-      std::vector<double> starts;
-      for (double f : {3.0, 8.0, 16.0, 32.0, 64.0, 150.0, 400.0, 1000.0})
-        if (f < f_max) starts.push_back(f);
-      if (starts.empty()) starts = rel(f_max, {0.1, 0.3, 0.8});  // sampled below 7.5 Hz (a slow process rig)
-      return {{"frequency_Hz", std::min(0.5, 0.1 * f_max), f_max, true, starts},
-              // Underdamped enough to peak: an overdamped "mode" low in frequency is a slow lag that passes for creep.
-              {"damping_ratio", 0.005, 0.7, true, {0.05, 0.3}},
-              {"direct_fraction", 0.0, 1.0, false, {0.0, 0.9}, 0.0},
-              {"parallel_fraction", 0.0, 1.0, false, {0.0, 0.1}, 0.0}};
-    }
-    case EffectKind::drift: {
-      const double dur = std::max(d.duration_s, 0.0);
-      // An onset within the last tenth of the fit segment, or after it, leaves a ramp fitted to a few
-      // samples (or none) and extrapolated over the held-out data: a 14 s recording's drift fitted there
-      // at 1.2 um/s, 28x the held-out error.
-      const double onset_max = std::min(dur, 0.9 * d.fit_end_s);
-      return {{"offset_um", -y_abs, y_abs, false, {0.0}},
-              {"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, rel(y_abs, {-1e-4, 1e-4})},
-              {"onset_s", 0.0, onset_max, false, {0.0, std::min(0.25 * dur, onset_max), std::min(0.5 * dur, onset_max)}},
-              // Thermal drift settles; a settling time a thousand recordings long is a ramp (0, the
-              // default of older files, is exactly one), a fiftieth of one nearly a step.
-              {"settling_time_s", 0.02 * dur, std::max(1e3 * dur, 1.0), true, {1e3 * dur, 0.3 * dur}, 0.0},
-              // A drift that wanders (a random walk: thermal or sensor) is no function of time a model can
-              // carry; its size is. Not fitted as a number (fixed): diagnose fits such a drift as a smooth
-              // curve through each recording (a space of its own) and sets this from the curve.
-              {"wander_um_per_sqrt_s", 0.0, 10.0 * y_abs, false, {0.0}, 0.0, true}};
-    }
+    case EffectKind::resonance: return resonance_specs(Ts);
+    case EffectKind::drift: return drift_specs(d);
     case EffectKind::bias_dependent_dynamics:
       // beta per reference displacement: the largest recorded one, so beta means the same for a nanometre
       // piezo and a millimetre stroke (a fixed f(500 V) reference left it powerless off the PVC gel's scale).
