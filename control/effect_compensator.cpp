@@ -136,7 +136,8 @@ double EffectCompensator::slew_forward(double u) const noexcept {
 
 double EffectCompensator::slew_inverse(double x) const noexcept {
   if (!has(EffectKind::slew_limit)) return x;
-  if (slew_digital()) return slew_state_V_ + std::clamp(x - slew_state_V_, -slew_step_V_, slew_step_V_);
+  // The held step is its own inverse within reach; beyond it, the full step.
+  if (slew_digital()) return slew_forward(x);
   // Mean of the ramp g = e - e|e| / (2 cap) for |e| <= cap: solved for e; beyond reach, the full step.
   const double cap = slew_step_V_, g = std::clamp(x - slew_state_V_, -0.5 * cap, 0.5 * cap);
   const double e = std::copysign(cap * (1.0 - std::sqrt(std::max(1.0 - 2.0 * std::abs(g) / cap, 0.0))), g);

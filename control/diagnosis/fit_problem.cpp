@@ -515,6 +515,7 @@ DataScale data_scale(const std::vector<Series>& data, const std::vector<std::vec
   if (!(d.y_min_um <= d.y_max_um)) d.y_min_um = d.y_max_um = 0.0;  // no samples
   return d;
 }
+
 void cover_model_displacement(DataScale& d, const Prediction& refit) {
   if (!(refit.gain > 0.0)) return;
   d.model_y_min_um = INFINITY, d.model_y_max_um = -INFINITY;

@@ -340,11 +340,6 @@ TEST(AugmentedPlant, DigitalSlewLimitHoldsTheLimitedStep) {
   for (size_t k = 0; k < y.size(); ++k) ASSERT_NEAR(y[k], y_stairs[k], 1e-9) << k;
 }
 
-TEST(AugmentedPlant, SlewLimitFormIsAnalogOrDigital) {
-  EXPECT_THROW(validate(Effect{EffectKind::slew_limit, {1000.0, 0.5}}, 1e-3, "model.effect[0]"), ConfigError);
-  EXPECT_NO_THROW(validate(Effect{EffectKind::slew_limit, {1000.0, 1.0}}, 1e-3, "model.effect[0]"));
-}
-
 TEST(AugmentedPlant, ResonanceKeepsTheGainAndRingsAtItsFrequency) {
   const Effect e{EffectKind::resonance, {5.0, 0.05}};
   const auto u = steps(20000, 100.0, 300.0);

@@ -152,29 +152,20 @@ TEST(DiagnoseCommand, EndToEndJsonPredictionAndAnAugmentedModelTheSimRigRuns) {
   EXPECT_LT(worst_prediction, 0.03);
 }
 
-/// Diagnoses a saturation case of the in-house generator against a model file whose f is `f_scale` times
-/// the rig's, so the refit's gain comes out near 1 / f_scale; returns the outcome and that model.
-std::pair<DiagnoseOutcome, HammersteinModel> diagnose_saturation_with_f_scaled(const fs::path& dir, double f_scale,
-                                                                               const Series** recording) {
-  static const auto c = generate_case(control::paper_model(3), EffectKind::saturation, 5);
-  write_recording(dir / "rec.csv", c.recordings[0]);
-  auto nominal = control::paper_model(3);
-  auto poly = nominal.f.coefficients();
-  for (double& coefficient : poly) coefficient *= f_scale;
-  nominal.f = control::OddPolynomial(poly);
-  write(dir / "model.toml", "[model]\npoly = " + format("[%.9g, %.9g, %.9g]", poly[0], poly[1], poly[2]) +
-                                "\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n");
-  *recording = &c.recordings[0];
-  return {run_diagnose(args_in(dir)), nominal};
-}
-
 TEST(DiagnoseCommand, TheAugmentedModelScalesAnEffectInMicrometresWithTheGainItFoldsIntoF) {
   // The model file's f is 1.15x the rig's: the refit's gain (~0.87) goes into the augmented model's f, so a
   // saturation's knee, fitted on the nominal's displacement before that gain, must shrink with it. Written
   // as fitted, the augmented model ran 0.21 um from the fitted prediction here.
   const auto dir = temp_dir("gain");
-  const Series* recording = nullptr;
-  const auto [o, nominal] = diagnose_saturation_with_f_scaled(dir, 1.15, &recording);
+  const auto c = generate_case(control::paper_model(3), EffectKind::saturation, 5);
+  write_recording(dir / "rec.csv", c.recordings[0]);
+  auto nominal = control::paper_model(3);
+  auto poly = nominal.f.coefficients();
+  for (double& coefficient : poly) coefficient *= 1.15;
+  nominal.f = control::OddPolynomial(poly);
+  write(dir / "model.toml", "[model]\npoly = " + format("[%.9g, %.9g, %.9g]", poly[0], poly[1], poly[2]) +
+                                "\nG_num = [1.15, 1.03]\nG_den = [1.0, 17.11, 8.76]\n");
+  const auto o = run_diagnose(args_in(dir));
   ASSERT_EQ(o.result.verdict, "saturation") << o.summary;
   const double gain = o.result.nominal_refit.gain;
   ASSERT_NEAR(gain, 1.0 / 1.15, 0.05);
@@ -184,7 +175,7 @@ TEST(DiagnoseCommand, TheAugmentedModelScalesAnEffectInMicrometresWithTheGainItF
   EXPECT_NEAR(written.p[0], gain * o.result.effect.p[0], 1e-6 * written.p[0]);  // knee_um
   EXPECT_NEAR(written.p[1], gain * o.result.effect.p[1], 1e-6 * written.p[1]);  // softness_um
   EXPECT_EQ(written.p[2], o.result.effect.p[2]);                                  // on_drive: no unit
-  const auto [worst_rig, worst_prediction] = augmented_model_gaps(o, sim_cfg, nominal, *recording);
+  const auto [worst_rig, worst_prediction] = augmented_model_gaps(o, sim_cfg, nominal, c.recordings[0]);
   EXPECT_LT(worst_rig, 1e-5);
   EXPECT_LT(worst_prediction, 0.03);
   // The report gives the parameters as the augmented model does: in the recordings' micrometres.
