@@ -30,20 +30,21 @@ std::vector<std::pair<double, double>> creep_branches(const std::array<double, k
 namespace {
 
 /// The parameters that choose between two forms of an effect (0 or 1, fitted each in a space of its own):
-/// where each sits and what its two values mean.
+/// where each sits, what its two values mean, and whether 1 is slow_pole_only (G's slowest pole alone moves).
 struct FormFlag {
   EffectKind kind;
   size_t index;
   const char* when_0;
   const char* when_1;
+  bool slow_pole_only = false;
 };
 
 constexpr std::array kFormFlags{
     FormFlag{EffectKind::saturation, 2, "on the displacement", "on the drive"},
     FormFlag{EffectKind::slew_limit, 1, "an analog amplifier ramping inside the sample",
              "a digital limiter on the held command"},
-    FormFlag{EffectKind::asymmetric_dynamics, 1, "all of G's time constants", "G's slowest pole alone"},
-    FormFlag{EffectKind::bias_dependent_dynamics, 4, "all of G's time constants", "G's slowest pole alone"},
+    FormFlag{EffectKind::asymmetric_dynamics, 1, "all of G's time constants", "G's slowest pole alone", true},
+    FormFlag{EffectKind::bias_dependent_dynamics, 4, "all of G's time constants", "G's slowest pole alone", true},
 };
 
 const FormFlag* form_flag(EffectKind kind) noexcept {
@@ -74,7 +75,7 @@ std::optional<size_t> form_flag_index(EffectKind kind) noexcept {
 }
 
 std::optional<size_t> slow_pole_only_index(EffectKind kind) noexcept {
-  if (kind == EffectKind::asymmetric_dynamics || kind == EffectKind::bias_dependent_dynamics) return form_flag_index(kind);
+  if (const auto* flag = form_flag(kind); flag && flag->slow_pole_only) return flag->index;
   return std::nullopt;
 }
 

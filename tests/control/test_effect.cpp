@@ -6,6 +6,8 @@
 #include <cmath>
 #include <complex>
 #include <numbers>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "control/config_error.hpp"
@@ -213,6 +215,9 @@ TEST(Effect, EveryFormChoiceIsZeroOrOneAndTheErrorNamesIt) {
                                           Case{EffectKind::asymmetric_dynamics, 1, "slow_pole_only"},
                                           Case{EffectKind::bias_dependent_dynamics, 4, "slow_pole_only"}}) {
     ASSERT_EQ(form_flag_index(kind), index) << to_string(kind);
+    // Only the slow-pole choice says G's slowest pole moves alone.
+    EXPECT_EQ(slow_pole_only_index(kind), std::string(name) == "slow_pole_only" ? std::optional<size_t>(index) : std::nullopt)
+        << to_string(kind);
     Effect e{kind, {}};
     const auto specs = parameter_specs(kind, DataScale::unbounded(Ts));
     for (size_t i = 0; i < specs.size(); ++i)  // a valid value for each: its default where it has one
