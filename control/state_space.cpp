@@ -22,6 +22,31 @@ Eigen::VectorXcd roots_in_z(const Eigen::VectorXd& ascending_in_zinv) {
   while (desc.size() > 1 && desc.back() == 0.0) desc.pop_back();  // factors of z^-1 are delays
   return polynomial_roots(desc);
 }
+
+/// Balances M in place by a diagonal similarity D^-1 M D of powers of two (Parlett and Reinsch, as LAPACK's
+/// dgebal without its permutation): each state's row and column norms brought within a factor of two, which
+/// changes no bit of the matrix but its scale. Returns D's diagonal.
+Eigen::VectorXd balance(Eigen::MatrixXd& M) {
+  const Eigen::Index n = M.rows();
+  Eigen::VectorXd d = Eigen::VectorXd::Ones(n);
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const double column = M.col(i).lpNorm<1>() - std::abs(M(i, i)), row = M.row(i).lpNorm<1>() - std::abs(M(i, i));
+      if (column == 0.0 || row == 0.0) continue;  // an input's row of zeros: nothing to balance against
+      double c = column, r = row, f = 1.0;
+      while (c < r / 2.0) c *= 2.0, r /= 2.0, f *= 2.0;
+      while (c >= 2.0 * r) c /= 2.0, r *= 2.0, f /= 2.0;
+      if (c + r >= 0.95 * (column + row)) continue;
+      changed = true;
+      d(i) *= f;
+      M.col(i) *= f;
+      M.row(i) /= f;
+    }
+  }
+  return d;
+}
+
 }  // namespace
 
 std::complex<double> DiscreteTransferFunction::frequency_response(double omega, double Ts) const {
@@ -106,7 +131,12 @@ StateSpace discretize_zoh(const StateSpace& c, double Ts) {
   Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n + 1, n + 1);
   M.topLeftCorner(n, n) = c.A * Ts;
   M.topRightCorner(n, 1) = c.B * Ts;
-  const Eigen::MatrixXd E = M.exp();
+  // exp(D^-1 M D) = D^-1 exp(M) D. A badly scaled realisation (a fast G's numerator, 1e6, times a mode's
+  // wn^2, 4e6, in one entry) otherwise gave an unstable exponential of a stable block: |eigenvalue| 8.2
+  // where exp(lambda Ts) is 0.998 (seed 117's case011, a mode on a 10 kHz piezo beside G's slow pole moved
+  // alone), and the simulation ran to infinity.
+  const Eigen::VectorXd d = balance(M);
+  const Eigen::MatrixXd E = d.asDiagonal() * Eigen::MatrixXd(M.exp()) * d.cwiseInverse().asDiagonal();
   return {E.topLeftCorner(n, n), E.topRightCorner(n, 1), c.C, c.D};
 }
 

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <numbers>
 
 #include "control/config_error.hpp"
 #include "control/lti_filter.hpp"
@@ -92,6 +93,27 @@ TEST(StateSpace, ZohTransferFunctionHasMappedPolesAndDcGain) {
   const auto h = gd.frequency_response(w, Ts) * std::polar(1.0, w * Ts / 2.0);
   // At w Ts = 2e-3 the ZOH is G(jw) up to O((w Ts)^2) ~ 1e-6 relative.
   EXPECT_NEAR(std::abs(h - kPaperG(std::complex<double>(0.0, w))), 0.0, 1e-5 * std::abs(kPaperG({0.0, w})));
+}
+
+TEST(StateSpace, ZohOfABadlyScaledBlockMapsItsPoles) {
+  // A fast G (1.28e6 / (s^2 + 2723 s + 1.62e6)) driving a 313 Hz mode of damping 0.012 through G's own
+  // output, realised in parts: one entry is wn^2 times G's numerator, 5e12, beside entries of order 1. Its
+  // exponential at 10 kHz once came out with an eigenvalue of 8.2 (balancing fixes it).
+  const double a1 = 2720.5, a0 = 1.6189e6, b0 = 1.28403e6, wn = 2.0 * std::numbers::pi * 312.602, zeta = 0.0124488;
+  StateSpace c;
+  c.A = Eigen::MatrixXd::Zero(4, 4);
+  c.A(0, 0) = -a1, c.A(0, 1) = -a0, c.A(1, 0) = 1.0;
+  c.A(2, 3) = 1.0, c.A(3, 2) = -wn * wn, c.A(3, 3) = -2.0 * zeta * wn, c.A(3, 1) = wn * wn * b0;
+  c.B = Eigen::VectorXd::Unit(4, 0);
+  c.C = Eigen::RowVectorXd::Unit(4, 2);
+  const double Ts = 1e-4;
+  const Eigen::VectorXcd z = discretize_zoh(c, Ts).A.eigenvalues(), s = c.A.eigenvalues();
+  for (const auto& p : s) {
+    double nearest = INFINITY;
+    for (const auto& q : z) nearest = std::min(nearest, std::abs(q - std::exp(p * Ts)));
+    EXPECT_LT(nearest, 1e-6) << "pole " << p;  // eigenvalues of so non-normal a matrix are themselves good to ~1e-7
+  }
+  for (const auto& q : z) EXPECT_LT(std::abs(q), 1.0);
 }
 
 TEST(StateSpace, TustinOfFirstOrderLagMatchesBilinearCoefficients) {

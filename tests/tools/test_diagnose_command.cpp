@@ -605,7 +605,12 @@ TEST(DiagnoseIndependentCases, ALoopThatDoesNoWorkDoesNotBuyAFasterG) {
   // alpha -1.2e-4 (the loop itself did nothing), and the faster G made hysteresis the verdict.
   const auto o = diagnose_data("idle_loop_faster_g", "model.toml", {"rec0.csv", "rec1.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "resonance") << o.summary;
+  // Cut to 1 s, the mode and creep both reach the noise held out (0.0050 um): either may lead, the other
+  // named as equally good (with the exact exponential since the commit after 1ead5cd, creep leads here by
+  // the fourth digit; the whole recordings give `resonance`).
+  const auto& named = r.ambiguous_with;
+  EXPECT_TRUE(r.verdict == "resonance" || std::find(named.begin(), named.end(), "resonance") != named.end()) << o.summary;
+  EXPECT_NE(r.verdict, "hysteresis") << o.summary;
   for (const auto& e : r.mixture) EXPECT_NE(e.kind, EffectKind::hysteresis) << o.summary;
   const auto loop = std::find_if(r.candidates.begin(), r.candidates.end(),
                                  [](const auto& c) { return c.effect.kind == EffectKind::hysteresis; });
@@ -615,7 +620,10 @@ TEST(DiagnoseIndependentCases, ALoopThatDoesNoWorkDoesNotBuyAFasterG) {
   EXPECT_GE(loop->time_scale, 1.0 / (1.0 + defaults.time_scale_tolerance) - 1e-9) << o.summary;
   // The fitted mode lies above 400 Hz: the augmented model's sim runs at the recordings' 10 kHz, not the
   // default 1 kHz, at which its file was refused and not written.
-  EXPECT_GT(r.mixture.front().p[0], 400.0) << o.summary;
+  const auto mode = std::find_if(r.candidates.begin(), r.candidates.end(),
+                                 [](const auto& c) { return c.effect.kind == EffectKind::resonance; });
+  ASSERT_NE(mode, r.candidates.end());
+  EXPECT_GT(mode->effect.p[0], 400.0) << o.summary;
   EXPECT_NE(read(o.augmented_model_path).find("[controller]\nperiod_s = 0.0001\n"), std::string::npos);
 }
 
