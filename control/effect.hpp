@@ -343,6 +343,12 @@ class AugmentedPlant final {
   /// Output-error simulation: at rest at `initial_V`, then y[k] for every u[k].
   std::vector<double> simulate(std::span<const double> u_V, double initial_V);
 
+  /// The largest pole modulus of the discretised linear block over its time-scale grid (infinite when an entry
+  /// is not finite). A stable continuous block maps inside the unit circle, so 1 or more means the
+  /// discretisation itself went wrong (a badly scaled exponential did once, 7fdcb00), and the plant would run to
+  /// infinity. Configuration time (allocates): the sim backend checks it before it runs an augmented model.
+  [[nodiscard]] double largest_discrete_pole_modulus() const;
+
  private:
   static constexpr int kMaxOrder = 9;
   static constexpr size_t kKinds = kEffectKindNames.size();

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "control/config_error.hpp"
+#include "control/text_format.hpp"
 
 namespace pvcgel::control {
 
@@ -26,6 +27,10 @@ SimulatedRig::SimulatedRig(const SimRigConfig& c) : cfg_(c), rng_(c.seed) {
       throw ConfigError("sim.truth.effect", "a diagnosed effect replaces the rig's built-in effects: set [sim.hysteresis] "
                                             "and [sim.creep] enabled = false");
     augmented_.emplace(c.truth, c.io_delay_samples, c.sample_time_s, std::span<const Effect>(c.added_effects));
+    if (const double modulus = augmented_->largest_discrete_pole_modulus(); !(modulus < 1.0))
+      throw ConfigError("sim.truth.effect", format("the model with these effects discretises to an unstable block at "
+                                                   "%.6g s (largest pole modulus %.6g; a stable block maps below 1)",
+                                                   c.sample_time_s, modulus));
     for (const auto& e : c.added_effects)
       if (e.kind == EffectKind::drift) wander_step_um_ = e.p[kDriftWander] * std::sqrt(c.sample_time_s);
   }

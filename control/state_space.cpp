@@ -23,9 +23,8 @@ Eigen::VectorXcd roots_in_z(const Eigen::VectorXd& ascending_in_zinv) {
   return polynomial_roots(desc);
 }
 
-/// Balances M in place by a diagonal similarity D^-1 M D of powers of two (Parlett and Reinsch, as LAPACK's
-/// dgebal without its permutation): each state's row and column norms brought within a factor of two, which
-/// changes no bit of the matrix but its scale. Returns D's diagonal.
+}  // namespace
+
 Eigen::VectorXd balance(Eigen::MatrixXd& M) {
   const Eigen::Index n = M.rows();
   Eigen::VectorXd d = Eigen::VectorXd::Ones(n);
@@ -47,7 +46,6 @@ Eigen::VectorXd balance(Eigen::MatrixXd& M) {
   return d;
 }
 
-}  // namespace
 
 std::complex<double> DiscreteTransferFunction::frequency_response(double omega, double Ts) const {
   const std::complex<double> zinv = std::polar(1.0, -omega * Ts);

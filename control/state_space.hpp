@@ -51,6 +51,11 @@ StateSpace realize(const TransferFunction& g, const std::string& key = "model.G"
 /// Observable canonical (direct form II transposed) realisation of a discrete TF.
 StateSpace realize(const DiscreteTransferFunction& h);
 
+/// Balances M in place by a diagonal similarity D^-1 M D of powers of two (Parlett and Reinsch, as LAPACK's
+/// dgebal without its permutation): each state's row and column norms brought within a factor of two, which
+/// changes no eigenvalue and, being powers of two, no bit of the matrix but its scale. Returns D's diagonal.
+Eigen::VectorXd balance(Eigen::MatrixXd& M);
+
 /// Exact zero-order-hold discretisation via the matrix exponential of [[A B];[0 0]] Ts.
 StateSpace discretize_zoh(const StateSpace& continuous, double Ts_s);
 /// Bilinear (Tustin) discretisation, no prewarping.

@@ -507,6 +507,24 @@ TEST(AugmentedPlant, TheSlowPoleAloneBesideALightModeOnAFastGIsTheFoldedBlockWhe
   EXPECT_GT(gap.span, 2.0);
 }
 
+TEST(AugmentedPlant, ItsLargestDiscretePoleIsTheSlowestContinuousPoleMapped) {
+  // What the sim backend checks before it runs an augmented model: every grid entry's poles are exp(lambda Ts).
+  // The same piezo and light mode, realised in parts: 8.2 here before 7fdcb00; now G's slow pole mapped.
+  const HammersteinModel piezo{OddPolynomial({0.0709, 4.54e-7}), TransferFunction({1.284e6}, {1.0, 2722.6, 1.6189e6})};
+  const double Ts_fast = 1e-4;
+  const Effect still{EffectKind::asymmetric_dynamics, {0.0, 1.0}}, mode{EffectKind::resonance, {312.602, 0.0124488, 0.0, 0.0}};
+  const std::vector<Effect> both{still, mode};
+  double slowest = -INFINITY;
+  for (const auto& pole : piezo.G.poles()) slowest = std::max(slowest, pole.real());
+  const double mode_modulus = std::exp(-0.0124488 * 2.0 * std::numbers::pi * 312.602 * Ts_fast);
+  const double expected = std::max(std::exp(slowest * Ts_fast), mode_modulus);
+  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, both).largest_discrete_pole_modulus(), expected, 1e-9);
+  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, mode).largest_discrete_pole_modulus(), expected, 1e-9);
+  // Asymmetric dynamics with kappa 1 add the entry that relaxes twice as slowly: its slow pole at half the rate.
+  const Effect slower{EffectKind::asymmetric_dynamics, {1.0, 1.0}};
+  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, slower).largest_discrete_pole_modulus(), std::exp(slowest * Ts_fast / 2.0), 1e-9);
+}
+
 TEST(AugmentedPlant, AsymmetricDynamicsOnTheSlowPoleAloneSlowOnlyItsRelaxation) {
   // slow_pole_only: in G's modal form r1/(s + p1) + r2/(s + p2), p1 the slow pole, the slow mode alone runs
   // 1 + kappa times slower while the displacement relaxes (G(0) f below it), its DC gain kept; the fast mode
