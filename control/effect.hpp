@@ -101,6 +101,11 @@ struct DataScale {
   /// The stroke has both signs, each a tenth of the largest |displacement| or more: it has a stop on each
   /// side, which need not lie at the same height.
   [[nodiscard]] bool bipolar_stroke() const noexcept { return std::min(-y_min_um, y_max_um) >= 0.1 * y_abs_um(); }
+  /// The middle of the nominal's own displacement when known (model_y_*), else of the recorded stroke.
+  [[nodiscard]] double y_middle_um() const noexcept {
+    const DataScale m = on_model_displacement();
+    return 0.5 * (m.y_min_um + m.y_max_um);
+  }
   /// The |displacement| nearest zero of a one-signed stroke (0 when it crosses zero): a sensor zeroed
   /// elsewhere records a stroke from 74 to 125 um, whose stop lies within that range, not within 0..125.
   [[nodiscard]] double y_abs_nearest_um() const noexcept {
@@ -137,7 +142,7 @@ struct DataScale {
 };
 
 /// Maximum number of parameters of one effect.
-inline constexpr int kMaxEffectParams = 5;
+inline constexpr int kMaxEffectParams = 6;
 
 /// Maximum number of effects one plant runs at once (a mixture of two).
 inline constexpr int kMaxEffects = 2;
@@ -303,10 +308,12 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///  - drift: offset + rate max(t - onset, 0), settling exponentially over settling_time_s when it is not 0
 ///    (drift_um), independent of the input; wander_um_per_sqrt_s > 0 adds a random walk (RMS change
 ///    wander sqrt(T) over T) that no prediction can follow: this plant leaves it out, SimulatedRig draws it;
-///  - bias_dependent_dynamics: G runs (1 + (beta y_op + amplitude_beta y_swing) / y_ref) times slower, y_op the
-///    displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over the
-///    same time (the amplitude of the motion about y_op) and y_ref = reference_um (diagnose sets it to the
-///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V));
+///  - bias_dependent_dynamics: G runs (1 + (beta (y_op - centre) + amplitude_beta y_swing) / y_ref) times slower,
+///    y_op the displacement low-passed over the operating-point time constant, y_swing |y - y_op| low-passed over
+///    the same time (the amplitude of the motion about y_op), y_ref = reference_um (diagnose sets it to the
+///    largest recorded displacement; 0, the default of files written before it existed: y_ref = G(0) f(500 V))
+///    and centre = centre_um, the displacement at which G's time constants are the nominal's (0, the default:
+///    at rest at zero; a nominal identified about an operating point holds there, not at zero);
 ///    slow_pole_only 1: only G's slowest real pole moves, its mode's DC gain kept (the fast dynamics do not
 ///    depend on the bias), 0 (the default): all of G's time constants. Beside creep or a mode the slow pole is
 ///    G's own: the block then runs G, the creep branches and the mode as separate states (the same transfer

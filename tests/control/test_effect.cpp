@@ -261,9 +261,9 @@ TEST(Effect, ScalingTheDisplacementScalesOnlyTheParametersInMicrometres) {
   EXPECT_EQ(scaled_drift[0], 4.0);   // offset_um
   EXPECT_EQ(scaled_drift[1], 0.2);   // rate_um_per_s
   EXPECT_EQ(scaled_drift[2], 5.0);   // onset in s
-  const Effect bias{EffectKind::bias_dependent_dynamics, {0.3, 0.5, 120.0, 0.1, 1.0}};
-  EXPECT_EQ(with_displacement_scaled(bias, 0.8).p[2], 96.0);  // reference_um; beta, tau, amplitude_beta, the form stay
-  EXPECT_EQ(with_displacement_scaled(bias, 0.8).p[0], 0.3);
+  const Effect bias{EffectKind::bias_dependent_dynamics, {0.3, 0.5, 120.0, 0.1, 1.0, 60.0}};
+  EXPECT_EQ(with_displacement_scaled(bias, 0.8).p, (std::array<double, kMaxEffectParams>{0.3, 0.5, 96.0, 0.1, 1.0, 48.0}));
+  // reference_um and centre_um; beta, tau, amplitude_beta and the form stay
   const Effect loop{EffectKind::hysteresis, {0.1, 20.0, 0.5}};
   EXPECT_EQ(with_displacement_scaled(loop, 0.8).p, loop.p);  // volts and shares
 }
@@ -446,6 +446,42 @@ TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneMoveItAndKeepItsGain
               "(span %.1f um)\n", largest_error, largest_gap_to_all, span_um);
   EXPECT_LT(largest_error, 5e-4 * span_um);  // the 41-point grid's interpolation
   EXPECT_GT(largest_gap_to_all, 0.02 * span_um);  // and it is not the all-poles form
+}
+
+TEST(AugmentedPlant, BiasDependentDynamicsAboutACentreRunTheNominalThereAndMoveWithTheDistanceFromIt) {
+  // centre_um c: N = 1 + beta (y - c) / y_ref, so a nominal identified about an operating point holds there.
+  // Reference as above (the modal form stepped exactly with N held), on the slow pole alone.
+  const auto model = paper_model(3);
+  const double beta = -1.2, y_ref = model.G.dc_gain() * model.f(600.0), centre = model.G.dc_gain() * model.f(400.0);
+  const Effect e{EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref, 0.0, 1.0, centre}};
+  const auto [p1, p2, r1, r2] = paper_modes(model);
+  const auto u = up_and_down();
+  const auto y = run(e, u, 0.0);
+  double x1 = 0.0, x2 = 0.0, largest_error = 0.0;
+  for (size_t k = 1; k < u.size(); ++k) {
+    const double y_before = r1 * x1 + r2 * x2, w = model.f(k >= 2 ? u[k - 2] : 0.0);
+    const double N = std::clamp(1.0 + beta * (y_before - centre) / y_ref, 0.25, 4.0);
+    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
+    x1 = a1 * x1 + (1.0 - a1) * w / p1;
+    x2 = a2 * x2 + (1.0 - a2) * w / p2;
+    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2)));
+  }
+  EXPECT_LT(largest_error, 5e-4 * y_ref);
+  // A small step about the centre: the nominal's response (N within 1 +- 0.02); the same effect centred at zero
+  // runs it there with N = 1 - 1.2 x 0.37, near twice as fast.
+  std::vector<double> small(4000, 405.0);
+  small[0] = 400.0;
+  const auto about = run(e, small, 400.0), nominal = run({}, small, 400.0);
+  Effect at_zero = e;
+  at_zero.p[5] = 0.0;
+  const auto from_zero = run(at_zero, small, 400.0);
+  const auto gap = [&](const std::vector<double>& v) { return gap_to(v, nominal).largest; };
+  const double step_um = nominal.back() - nominal.front();
+  std::printf("step %.3f um: %.4f um from the nominal about the centre, %.4f um centred at zero\n", step_um, gap(about),
+              gap(from_zero));
+  EXPECT_LT(gap(about), 0.02 * step_um);
+  EXPECT_GT(gap(from_zero), 0.05 * step_um);
+  EXPECT_LT(gap(about), 0.1 * gap(from_zero));
 }
 
 TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneBesideCreepMoveGsSlowPoleAloneNotTheCreeps) {
@@ -771,6 +807,14 @@ TEST(EffectTables, AListDominantFirstAndTheOldSingleTable) {
   const auto one = parse_effects("[sim.truth.effect]\nname = \"resonance\"\nfrequency_Hz = 40.0\ndamping_ratio = 0.1\n");
   ASSERT_EQ(one.size(), 1u);
   EXPECT_DOUBLE_EQ(one[0].p[2], 0.0);  // direct_fraction: optional, a full mode
+  const auto bias = parse_effects("[sim.truth.effect]\nname = \"bias_dependent_dynamics\"\nbeta = 0.2\n"
+                                  "operating_point_time_constant_s = 1\n");
+  ASSERT_EQ(bias.size(), 1u);
+  EXPECT_DOUBLE_EQ(bias[0].p[5], 0.0);  // centre_um: optional, G the nominal's at zero displacement as before
+  const auto centred = parse_effects("[sim.truth.effect]\nname = \"bias_dependent_dynamics\"\nbeta = 0.2\n"
+                                     "operating_point_time_constant_s = 1\ncentre_um = 45.5\n");
+  ASSERT_EQ(centred.size(), 1u);
+  EXPECT_DOUBLE_EQ(centred[0].p[5], 45.5);
   EXPECT_TRUE(parse_effects("[sim.truth]\n").empty());
 }
 

@@ -541,6 +541,22 @@ TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop)
   EXPECT_GT(r.mixture[0].p[0], 0.0) << "relaxation_slowdown: the relaxation is the slower\n" << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
+  // A case of the independent generator (tests/data/bias_about_a_centre/README.md): the slow pole moves with
+  // the displacement, recorded between about 75 and 125 um. Centred at zero, the form needed G's time
+  // constants there beyond the refit's tolerance and the verdict was `unexplained`.
+  const auto o = diagnose_data("bias_about_a_centre", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "bias_dependent_dynamics") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  const auto& e = r.mixture[0];
+  ASSERT_EQ(e.kind, EffectKind::bias_dependent_dynamics) << o.summary;
+  EXPECT_GT(e.p[5], 50.0) << "centre_um: within the recorded range, not at zero\n" << o.summary;
+  EXPECT_LT(e.p[5], 150.0) << "centre_um\n" << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 0.7 * r.nominal_refit.errors.rmse_validation_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, ACandidateThatExplainsTheExcessLeadsOneThatDoesNot) {
   // A case of the independent generator (tests/data/explained_below_a_penalised_leader/README.md): judged on
   // the fitting segment at the noise floor, the penalised ranking put a delay that explains nothing above
