@@ -696,6 +696,7 @@ std::vector<double> AugmentedPlant::simulate(std::span<const double> u, double i
 
 double AugmentedPlant::largest_discrete_pole_modulus() const {
   const auto n = rest_B_.size();
+  if (n == 0) return 0.0;  // a static block: no pole
   double largest = 0.0;
   for (const auto& ab : AB_grid_) {
     Eigen::MatrixXd A(n, n);
@@ -703,7 +704,7 @@ double AugmentedPlant::largest_discrete_pole_modulus() const {
       for (Eigen::Index c = 0; c < n; ++c) A(r, c) = ab[static_cast<size_t>(r * (n + 1) + c)];
     if (!A.allFinite()) return INFINITY;
     (void)balance(A);  // a block realised in parts spans 12 decades: its eigenvalues to 1e-7 unbalanced
-    if (n > 0) largest = std::max(largest, Eigen::EigenSolver<Eigen::MatrixXd>(A, false).eigenvalues().cwiseAbs().maxCoeff());
+    largest = std::max(largest, Eigen::EigenSolver<Eigen::MatrixXd>(A, false).eigenvalues().cwiseAbs().maxCoeff());
   }
   return largest;
 }

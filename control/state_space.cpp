@@ -22,7 +22,6 @@ Eigen::VectorXcd roots_in_z(const Eigen::VectorXd& ascending_in_zinv) {
   while (desc.size() > 1 && desc.back() == 0.0) desc.pop_back();  // factors of z^-1 are delays
   return polynomial_roots(desc);
 }
-
 }  // namespace
 
 Eigen::VectorXd balance(Eigen::MatrixXd& M) {
@@ -45,7 +44,6 @@ Eigen::VectorXd balance(Eigen::MatrixXd& M) {
   }
   return d;
 }
-
 
 std::complex<double> DiscreteTransferFunction::frequency_response(double omega, double Ts) const {
   const std::complex<double> zinv = std::polar(1.0, -omega * Ts);

@@ -51,6 +51,29 @@ std::vector<double> up_and_down() {
   return u;
 }
 
+/// The reference of the slow-pole-only forms: G's modal form stepped exactly over each sample (ZOH) with the slow
+/// mode N = clamp(1 + beta (y - centre) / y_ref, 0.25, 4) times slower, N held over the sample, the plant's
+/// 1-sample I/O delay, y_op = y (time constant 0), at rest at 0 V first; with creep_fraction c not 0, plus a
+/// creep branch c G(0) / (tau s + 1) in parallel, stepped with its own pole.
+std::vector<double> slow_pole_reference(const HammersteinModel& model, const std::vector<double>& u, double beta,
+                                        double y_ref, double centre, double creep_fraction = 0.0,
+                                        double creep_tau_s = 1.0) {
+  const auto [p1, p2, r1, r2] = paper_modes(model);
+  const double a2 = std::exp(-p2 * Ts), a3 = std::exp(-Ts / creep_tau_s), creep_gain = creep_fraction * model.G.dc_gain();
+  std::vector<double> y(u.size(), 0.0);
+  double x1 = 0.0, x2 = 0.0, x3 = 0.0;
+  for (size_t k = 1; k < u.size(); ++k) {
+    const double w = model.f(k >= 2 ? u[k - 2] : 0.0);
+    const double N = std::clamp(1.0 + beta * (y[k - 1] - centre) / y_ref, 0.25, 4.0);
+    const double a1 = std::exp(-p1 * Ts / N);
+    x1 = a1 * x1 + (1.0 - a1) * w / p1;
+    x2 = a2 * x2 + (1.0 - a2) * w / p2;
+    x3 = a3 * x3 + (1.0 - a3) * creep_gain * w;
+    y[k] = r1 * x1 + r2 * x2 + x3;
+  }
+  return y;
+}
+
 std::vector<double> steps(size_t n, double from, double to) {
   std::vector<double> u(n, to);
   u[0] = from;
@@ -423,24 +446,14 @@ TEST(AugmentedPlant, AmplitudeDependentDynamicsSlowALargeSwingAndLeaveAHoldAlone
 
 TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneMoveItAndKeepItsGain) {
   // slow_pole_only: in G's modal form r1/(s + p1) + r2/(s + p2), p1 the slow pole, the slow mode alone runs
-  // N = 1 + beta y / y_ref times slower (its DC gain r1 / p1 kept). Reference: that form stepped exactly
-  // over each sample with N held (ZOH), the plant's 1-sample I/O delay, y_op = y (time constant 0).
+  // N = 1 + beta y / y_ref times slower (its DC gain r1 / p1 kept): slow_pole_reference.
   const auto model = paper_model(3);
   const double beta = 1.5, y_ref = model.G.dc_gain() * model.f(500.0);
   const Effect e{EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref, 0.0, 1.0}};
-  const auto [p1, p2, r1, r2] = paper_modes(model);
   const auto u = up_and_down();
   const auto y = run(e, u, 0.0), y_all = run({EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref}}, u, 0.0);
-  double x1 = 0.0, x2 = 0.0, largest_error = 0.0, largest_gap_to_all = 0.0;
-  for (size_t k = 1; k < u.size(); ++k) {
-    const double y_before = r1 * x1 + r2 * x2, w = model.f(k >= 2 ? u[k - 2] : 0.0);
-    const double N = std::clamp(1.0 + beta * y_before / y_ref, 0.25, 4.0);
-    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
-    x1 = a1 * x1 + (1.0 - a1) * w / p1;
-    x2 = a2 * x2 + (1.0 - a2) * w / p2;
-    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2)));
-    largest_gap_to_all = std::max(largest_gap_to_all, std::abs(y[k] - y_all[k]));
-  }
+  const double largest_error = gap_to(y, slow_pole_reference(model, u, beta, y_ref, 0.0)).largest;
+  const double largest_gap_to_all = gap_to(y, y_all).largest;
   const double span_um = model.G.dc_gain() * model.f(600.0);
   std::printf("slow pole alone: largest error %.4f um against the modal reference, %.3f um from all poles scaled "
               "(span %.1f um)\n", largest_error, largest_gap_to_all, span_um);
@@ -450,23 +463,12 @@ TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneMoveItAndKeepItsGain
 
 TEST(AugmentedPlant, BiasDependentDynamicsAboutACentreRunTheNominalThereAndMoveWithTheDistanceFromIt) {
   // centre_um c: N = 1 + beta (y - c) / y_ref, so a nominal identified about an operating point holds there.
-  // Reference as above (the modal form stepped exactly with N held), on the slow pole alone.
+  // Reference: slow_pole_reference, on the slow pole alone.
   const auto model = paper_model(3);
   const double beta = -1.2, y_ref = model.G.dc_gain() * model.f(600.0), centre = model.G.dc_gain() * model.f(400.0);
   const Effect e{EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref, 0.0, 1.0, centre}};
-  const auto [p1, p2, r1, r2] = paper_modes(model);
   const auto u = up_and_down();
-  const auto y = run(e, u, 0.0);
-  double x1 = 0.0, x2 = 0.0, largest_error = 0.0;
-  for (size_t k = 1; k < u.size(); ++k) {
-    const double y_before = r1 * x1 + r2 * x2, w = model.f(k >= 2 ? u[k - 2] : 0.0);
-    const double N = std::clamp(1.0 + beta * (y_before - centre) / y_ref, 0.25, 4.0);
-    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
-    x1 = a1 * x1 + (1.0 - a1) * w / p1;
-    x2 = a2 * x2 + (1.0 - a2) * w / p2;
-    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2)));
-  }
-  EXPECT_LT(largest_error, 5e-4 * y_ref);
+  EXPECT_LT(gap_to(run(e, u, 0.0), slow_pole_reference(model, u, beta, y_ref, centre)).largest, 5e-4 * y_ref);
   // A small step about the centre: the nominal's response (N within 1 +- 0.02); the same effect centred at zero
   // runs it there with N = 1 - 1.2 x 0.37, near twice as fast.
   std::vector<double> small(4000, 405.0);
@@ -485,29 +487,16 @@ TEST(AugmentedPlant, BiasDependentDynamicsAboutACentreRunTheNominalThereAndMoveW
 }
 
 TEST(AugmentedPlant, BiasDependentDynamicsOnTheSlowPoleAloneBesideCreepMoveGsSlowPoleAloneNotTheCreeps) {
-  // The reference of the test above plus a creep branch c G(0) / (tau s + 1) in parallel, stepped exactly with
-  // its own pole: the block beside creep is realised in parts, so only G's slow mode runs N times slower.
+  // The reference with a creep branch c G(0) / (tau s + 1) in parallel, stepped exactly with its own pole: the
+  // block beside creep is realised in parts, so only G's slow mode runs N times slower.
   const auto model = paper_model(3);
   const double beta = 1.5, y_ref = model.G.dc_gain() * model.f(500.0), c = 0.2, tau_s = 5.0;
   const std::vector<Effect> e{{EffectKind::bias_dependent_dynamics, {beta, 0.0, y_ref, 0.0, 1.0}},
                               {EffectKind::creep, {c, tau_s}}};
-  const auto [p1, p2, r1, r2] = paper_modes(model);
-  const double g0 = model.G.dc_gain();
   const auto u = up_and_down();
   AugmentedPlant plant(model, 1, Ts, e);
-  const auto y = plant.simulate(u, 0.0);
-  double x1 = 0.0, x2 = 0.0, x3 = 0.0, largest_error = 0.0;
-  const double a3 = std::exp(-Ts / tau_s);
-  for (size_t k = 1; k < u.size(); ++k) {
-    const double y_before = r1 * x1 + r2 * x2 + x3, w = model.f(k >= 2 ? u[k - 2] : 0.0);
-    const double N = std::clamp(1.0 + beta * y_before / y_ref, 0.25, 4.0);
-    const double a1 = std::exp(-p1 * Ts / N), a2 = std::exp(-p2 * Ts);
-    x1 = a1 * x1 + (1.0 - a1) * w / p1;
-    x2 = a2 * x2 + (1.0 - a2) * w / p2;
-    x3 = a3 * x3 + (1.0 - a3) * c * g0 * w;
-    largest_error = std::max(largest_error, std::abs(y[k] - (r1 * x1 + r2 * x2 + x3)));
-  }
-  const double span_um = g0 * (1.0 + c) * model.f(600.0);
+  const double largest_error = gap_to(plant.simulate(u, 0.0), slow_pole_reference(model, u, beta, y_ref, 0.0, c, tau_s)).largest;
+  const double span_um = model.G.dc_gain() * (1.0 + c) * model.f(600.0);
   EXPECT_LT(largest_error, 5e-4 * span_um);  // the 41-point grid's interpolation, as above
 }
 
@@ -526,16 +515,22 @@ TEST(AugmentedPlant, TheSlowPoleAloneBesideAModeOrCreepIsTheFoldedBlockWhenItDoe
   }
 }
 
+/// A 10 kHz piezo (G's poles at 125 and 290 Hz) with a 313 Hz mode of damping 0.012 beside asymmetric dynamics
+/// on G's slow pole that do not move it: realised in parts, the block was discretised unstable (a badly scaled
+/// matrix exponential) before 7fdcb00 and ran to infinity within 30 samples (seed 117's case011,
+/// tests/data/nan_pair_start).
+struct LightModeOnAPiezo {
+  HammersteinModel piezo{OddPolynomial({0.0709, 4.54e-7}), TransferFunction({1.284e6}, {1.0, 2722.6, 1.6189e6})};
+  double Ts_s = 1e-4;
+  Effect still{EffectKind::asymmetric_dynamics, {0.0, 1.0}}, mode{EffectKind::resonance, {312.602, 0.0124488, 0.0, 0.0}};
+  std::vector<Effect> both{still, mode};
+};
+
 TEST(AugmentedPlant, TheSlowPoleAloneBesideALightModeOnAFastGIsTheFoldedBlockWhenItDoesNotMove) {
-  // The same on a 10 kHz piezo (G's poles at 125 and 290 Hz) with a 313 Hz mode of damping 0.012: the block
-  // realised in parts was discretised unstable (a badly scaled matrix exponential) and ran to infinity
-  // within 30 samples (seed 117's case011, tests/data/nan_pair_start).
-  const HammersteinModel piezo{OddPolynomial({0.0709, 4.54e-7}), TransferFunction({1.284e6}, {1.0, 2722.6, 1.6189e6})};
-  const double Ts_fast = 1e-4;
-  const Effect still{EffectKind::asymmetric_dynamics, {0.0, 1.0}}, mode{EffectKind::resonance, {312.602, 0.0124488, 0.0, 0.0}};
+  // The same on LightModeOnAPiezo.
+  const LightModeOnAPiezo c;
   const auto u = steps(3000, -57.0, 40.0);
-  const std::vector<Effect> both{still, mode};
-  AugmentedPlant in_parts(piezo, 0, Ts_fast, both), folded(piezo, 0, Ts_fast, mode);
+  AugmentedPlant in_parts(c.piezo, 0, c.Ts_s, c.both), folded(c.piezo, 0, c.Ts_s, c.mode);
   const auto y = in_parts.simulate(u, u[0]);
   ASSERT_TRUE(std::all_of(y.begin(), y.end(), [](double v) { return std::isfinite(v); }));
   const auto gap = gap_to(y, folded.simulate(u, u[0]));
@@ -545,20 +540,18 @@ TEST(AugmentedPlant, TheSlowPoleAloneBesideALightModeOnAFastGIsTheFoldedBlockWhe
 
 TEST(AugmentedPlant, ItsLargestDiscretePoleIsTheSlowestContinuousPoleMapped) {
   // What the sim backend checks before it runs an augmented model: every grid entry's poles are exp(lambda Ts).
-  // The same piezo and light mode, realised in parts: 8.2 here before 7fdcb00; now G's slow pole mapped.
-  const HammersteinModel piezo{OddPolynomial({0.0709, 4.54e-7}), TransferFunction({1.284e6}, {1.0, 2722.6, 1.6189e6})};
-  const double Ts_fast = 1e-4;
-  const Effect still{EffectKind::asymmetric_dynamics, {0.0, 1.0}}, mode{EffectKind::resonance, {312.602, 0.0124488, 0.0, 0.0}};
-  const std::vector<Effect> both{still, mode};
+  // LightModeOnAPiezo, realised in parts: 8.2 here before 7fdcb00; now G's slow pole mapped.
+  const LightModeOnAPiezo c;
   double slowest = -INFINITY;
-  for (const auto& pole : piezo.G.poles()) slowest = std::max(slowest, pole.real());
-  const double mode_modulus = std::exp(-0.0124488 * 2.0 * std::numbers::pi * 312.602 * Ts_fast);
-  const double expected = std::max(std::exp(slowest * Ts_fast), mode_modulus);
-  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, both).largest_discrete_pole_modulus(), expected, 1e-9);
-  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, mode).largest_discrete_pole_modulus(), expected, 1e-9);
+  for (const auto& pole : c.piezo.G.poles()) slowest = std::max(slowest, pole.real());
+  const double mode_modulus = std::exp(-c.mode.p[1] * 2.0 * std::numbers::pi * c.mode.p[0] * c.Ts_s);
+  const double expected = std::max(std::exp(slowest * c.Ts_s), mode_modulus);
+  EXPECT_NEAR(AugmentedPlant(c.piezo, 0, c.Ts_s, c.both).largest_discrete_pole_modulus(), expected, 1e-9);
+  EXPECT_NEAR(AugmentedPlant(c.piezo, 0, c.Ts_s, c.mode).largest_discrete_pole_modulus(), expected, 1e-9);
   // Asymmetric dynamics with kappa 1 add the entry that relaxes twice as slowly: its slow pole at half the rate.
   const Effect slower{EffectKind::asymmetric_dynamics, {1.0, 1.0}};
-  EXPECT_NEAR(AugmentedPlant(piezo, 0, Ts_fast, slower).largest_discrete_pole_modulus(), std::exp(slowest * Ts_fast / 2.0), 1e-9);
+  EXPECT_NEAR(AugmentedPlant(c.piezo, 0, c.Ts_s, slower).largest_discrete_pole_modulus(), std::exp(slowest * c.Ts_s / 2.0),
+              1e-9);
 }
 
 TEST(AugmentedPlant, AsymmetricDynamicsOnTheSlowPoleAloneSlowOnlyItsRelaxation) {
