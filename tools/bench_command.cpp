@@ -181,6 +181,7 @@ void add_diagnose_bench(CLI::App& bench) {
     std::string suite;
     int jobs = 1;
     int limit = 0;
+    int retime = 5;
   };
   auto args = std::make_shared<Args>();
   auto* cmd = bench.add_subcommand("diagnose", "Blind suite for pvcgel diagnose: concealed effects, confusion matrix, accuracy");
@@ -192,9 +193,15 @@ void add_diagnose_bench(CLI::App& bench) {
                   "(case,effects,dominant,...; effects none, a name or a+b)")->check(CLI::ExistingDirectory);
   cmd->add_option("--jobs", args->jobs, "cases diagnosed in parallel (--suite)")->capture_default_str()->check(CLI::Range(1, 64));
   cmd->add_option("--limit", args->limit, "only the first N cases of --suite (0: all)")->capture_default_str();
+  cmd->add_option("--retime", args->retime,
+                  "with --jobs > 1 (each case then fits on a share of the cores): diagnose the N slowest cases "
+                  "again, one at a time on every core, as a user runs one (--suite)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10000));
   cmd->callback([args] {
     if (!args->suite.empty()) {
-      std::cout << format_directory_suite(run_directory_suite(args->suite, args->jobs, std::cout, args->limit));
+      std::cout << format_directory_suite(
+          run_directory_suite(args->suite, args->jobs, std::cout, args->limit, args->retime));
       return;
     }
     const auto r = run_blind_suite(args->cases, args->seed, std::cout, {}, args->save);

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
 #include <filesystem>
@@ -388,7 +389,31 @@ void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o)
 
 }  // namespace
 
-DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit) {
+namespace {
+
+/// The `count` slowest of `out` diagnosed again one at a time on every core (run_directory_suite).
+void retime_alone(DirectorySuiteResult& r, const std::string& dir, const std::vector<LabelledCase>& cases,
+                  const std::vector<CaseOutcome>& out, int count, std::ostream& log) {
+  std::vector<size_t> order(out.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return out[a].seconds > out[b].seconds; });
+  order.resize(std::min(order.size(), static_cast<size_t>(count)));
+  r.alone_threads = threads_per_job(1);
+  for (size_t i : order) {
+    const CaseOutcome again = run_case(std::filesystem::path(dir) / cases[i].name, r.alone_threads);
+    const bool changed = again.verdict != out[i].verdict || again.mixture != out[i].mixture;
+    r.alone_answer_changed += changed;
+    r.alone_s.emplace_back(cases[i].name, again.seconds);
+    log << format("%s again alone on %d threads: %.1f s (%.1f s beside the other jobs)%s\n", cases[i].name.c_str(),
+                  r.alone_threads, again.seconds, out[i].seconds, changed ? ", ANOTHER ANSWER: " : "")
+        << (changed ? again.verdict + " / " + again.mixture + "\n" : "") << std::flush;
+  }
+}
+
+}  // namespace
+
+DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit,
+                                         int retime_slowest) {
   namespace fs = std::filesystem;
   auto cases = read_labels(fs::path(dir) / "labels.csv");
   if (limit > 0 && static_cast<size_t>(limit) < cases.size()) cases.resize(static_cast<size_t>(limit));
@@ -408,6 +433,9 @@ DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::
     time_sum += out[i].seconds;
   }
   r.mean_case_s = r.cases ? time_sum / r.cases : 0.0;
+  r.jobs = jobs;
+  r.threads_per_case = threads;
+  if (jobs > 1 && retime_slowest > 0) retime_alone(r, dir, cases, out, retime_slowest, log);
   return r;
 }
 
@@ -469,6 +497,21 @@ std::string mixtures_missed(const DirectorySuiteResult& r) {
                 r.mixture_missed_single_at_noise);
 }
 
+/// The slowest cases' times alone (DirectorySuiteResult::alone_s) in the suite's order, or nothing when not
+/// re-timed.
+std::string alone_times(const DirectorySuiteResult& r) {
+  if (r.alone_s.empty()) return "";
+  std::string each;
+  double max_s = 0.0;
+  for (const auto& [name, s] : r.alone_s) {
+    each += format("%s%s %.1f s", each.empty() ? "" : ", ", name.c_str(), s);
+    max_s = std::max(max_s, s);
+  }
+  return format("  the %zu slowest again, one at a time on %d threads as `pvcgel diagnose` runs alone: max %.2f s "
+                "(target <= 30 s: ratio %.2f; %s); another answer in %d\n",
+                r.alone_s.size(), r.alone_threads, max_s, max_s / 30.0, each.c_str(), r.alone_answer_changed);
+}
+
 }  // namespace
 
 std::string format_directory_suite(const DirectorySuiteResult& r) {
@@ -483,7 +526,7 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
                   100.0 * a / n / ratio_to_target);
   };
   s += format("cases %d (single effects %d, none %d, mixtures %d; %d stopped with an error)\n%s\n%s\n%s; dominant named %d/%d\n%s"
-              "time per case: mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n"
+              "time per case (%d at once, each on %d thread%s): mean %.2f s, max %.2f s (target <= 30 s: ratio %.2f)\n%s"
               "nominal refit at a tolerance (with the named effects, else nuisance-only): %d cases, %d of them right; the other %d: %d right\n"
               "single-effect or none cases naming a false second effect: %d; second effect withheld (pair refit at a tolerance): %d cases, %d of them in the labels\n"
               "refit widened (not none at the ordinary tolerances; the gain stopped at its own, or f's shape did and "
@@ -493,8 +536,8 @@ std::string format_directory_suite(const DirectorySuiteResult& r) {
               score("single-effect accuracy", r.single_correct, r.single_cases, ">= 95%", 95.0).c_str(),
               score("false alarms on none", r.false_alarms, r.none_cases, "<= 2%", 2.0).c_str(),
               score("mixtures with both effects named", r.mixture_both_named, r.mixture_cases, ">= 80%", 80.0).c_str(),
-              r.mixture_dominant_correct, r.mixture_cases, held_out_ratios(r).c_str(), r.mean_case_s, r.max_case_s,
-              r.max_case_s / 30.0, r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
+              r.mixture_dominant_correct, r.mixture_cases, held_out_ratios(r).c_str(), r.jobs, r.threads_per_case,
+              r.threads_per_case == 1 ? "" : "s", r.mean_case_s, r.max_case_s, r.max_case_s / 30.0, alone_times(r).c_str(), r.refit_at_bound, r.refit_at_bound_right, r.cases - r.refit_at_bound,
               r.refit_inside_right, r.false_second, r.withheld, r.withheld_true, r.widened, r.widened_right,
               r.single_ambiguous, r.single_ambiguous_right, r.single_truth_among_ambiguous);
   if (r.visible_single_cases + r.visible_mixture_cases > 0)

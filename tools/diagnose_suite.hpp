@@ -59,6 +59,12 @@ struct DirectorySuiteResult {
   static constexpr double kHeldOutShowsEffect = 1.5;
   std::vector<double> ratios_held_out_shows_effect;
   double max_case_s = 0.0, mean_case_s = 0.0;
+  int jobs = 1, threads_per_case = 1;  ///< how the suite ran: `jobs` cases at once, each fitting on that many threads
+  /// The slowest cases diagnosed again one at a time on every core, as `pvcgel diagnose` runs alone
+  /// (run_directory_suite's `retime_slowest`): {case, seconds}, slowest first; their threads; and how many
+  /// of them gave another verdict or mixture the second time (the answer does not depend on the threads).
+  std::vector<std::pair<std::string, double>> alone_s;
+  int alone_threads = 1, alone_answer_changed = 0;
   int cases = 0;
   /// Cases whose nominal refit stopped at a tolerance (NominalRefit::at_bounds), and how many of them,
   /// and of the others, were scored right (the verdict for a single effect or none, both named for a mixture).
@@ -94,8 +100,11 @@ struct DirectorySuiteResult {
 
 /// Runs `pvcgel diagnose` on every case of DIR (caseNNN/model.toml and recK.csv;
 /// labels from DIR/labels.csv, read only to score) with `jobs` parallel cases.
-/// One line per case goes to `log`. `limit` > 0 stops after that many cases.
-DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit = 0);
+/// One line per case goes to `log`. `limit` > 0 stops after that many cases. With `jobs` > 1 each case
+/// runs on a share of the cores, so `retime_slowest` > 0 then diagnoses that many of the slowest cases
+/// again, one at a time on every core: the time a user waits for one case.
+DirectorySuiteResult run_directory_suite(const std::string& dir, int jobs, std::ostream& log, int limit = 0,
+                                         int retime_slowest = 0);
 
 /// The confusion matrix and the scores, each with the target and the ratio to it.
 std::string format_directory_suite(const DirectorySuiteResult& r);

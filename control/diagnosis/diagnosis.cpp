@@ -406,11 +406,12 @@ PassStart start_pass(const HammersteinModel& model, const std::vector<Series>& d
 }
 
 /// The diagnosis at widened_tolerances, begun: its first stages (start_pass), why it was widened, and the
-/// ordinary diagnosis's candidate fits when it ran to the end first (the wide one's starts).
+/// ordinary diagnosis when it ran to the end first (its candidate fits are the wide one's starts, and its
+/// answer what the wide one must beat).
 struct WideStart {
   std::vector<std::string> from;
   std::optional<PassStart> start;
-  const std::vector<CandidateResult>* ordinary_fits = nullptr;
+  const DiagnosisResult* ordinary = nullptr;
 };
 
 /// Where a diagnosis_pass stands between runs of its first stages.
@@ -458,29 +459,56 @@ std::optional<DiagnosisResult> try_wider_curve(PassState& st, const PassStart& p
   return std::nullopt;
 }
 
-/// 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict. False, with st.second set, when
-/// the leading candidate fits clearly better at another delay: the pass runs once more at that delay.
-bool fit_and_decide(PassState& st, PassStart& p, const std::vector<Series>& data,
-                    const std::vector<CandidateResult>* ordinary_fits) {
+/// The held-out excess MSE a diagnosis's best single effect leaves, as a share of `ordinary`'s nuisance-only
+/// refit's (its nuisance-only refit's when no candidate was fitted).
+double best_single_left(const DiagnosisResult& r, const DiagnosisResult& ordinary) {
+  const Excess excess(ordinary);
+  const bool fitted = !r.candidates.empty() && r.candidates.front().fitted;
+  return excess(fitted ? r.candidates.front().errors : r.nominal_refit.errors) / excess.base;
+}
+
+/// A wide pass, its candidates fitted, whose best single effect does not predict the held-out data better than
+/// the ordinary diagnosis's best single effect by the ambiguity margin: it stops before its pairs. On the 240
+/// evaluation cases (2026-11-30, d51ac6b) 6 of the 15 wide passes were so, and none of those was kept after
+/// its pairs: the pairs, the longest stage, went to waste.
+bool wide_cannot_win(const WideStart& widened, const PassStart& p, const DiagnosisOptions& o) {
+  return widened.ordinary && o.stop_wide_without_better_single &&
+         best_single_left(p.res, *widened.ordinary) >= best_single_left(*widened.ordinary, *widened.ordinary) - o.ambiguity_margin;
+}
+
+enum class FitOutcome { at_another_delay, decided, wide_stopped };
+
+/// 4. Candidates, fitted jointly with the nuisance refit; 5. the verdict. at_another_delay, with st.second set,
+/// when the leading candidate fits clearly better at another delay: the pass runs once more at that delay.
+/// wide_stopped, without a verdict, when a wide pass cannot beat the ordinary one (wide_cannot_win).
+FitOutcome fit_and_decide(PassState& st, PassStart& p, const std::vector<Series>& data, const WideStart& widened) {
+  const auto* ordinary_fits = widened.ordinary ? &widened.ordinary->candidates : nullptr;
   const WarmStarts warm = st.second ? WarmStarts{&st.second->candidates, "candidate fits at the new delay"}
                                     : WarmStarts{ordinary_fits, "candidate fits from the ordinary run's", kRegriddedLeaders};
   fit_candidates(p.res, p.problem, data, p.scale, st.o, p.problem.residual({}, p.k).squaredNorm(), warm);
   if (const auto d = st.second ? std::nullopt : leading_delay(p.res, p.problem, data, p.scale, st.o)) {
     st.second = SecondPass{p.res.alignment, p.res.candidates, d->delay_samples, d->candidate};
     st.earlier_simulations += p.problem.simulations();
-    return false;
+    return FitOutcome::at_another_delay;
   }
+  if (wide_cannot_win(widened, p, st.o)) return FitOutcome::wide_stopped;
   decide(p.res, p.problem, data, p.scale, st.o);
-  return true;
+  return FitOutcome::decided;
 }
+
+/// A diagnosis_pass's answer; `decided` false when a wide pass stopped before its verdict (wide_cannot_win).
+struct PassOutcome {
+  DiagnosisResult res;
+  bool decided = true;
+};
 
 /// One diagnosis at the tolerances `options` gives, or from the start at widened_tolerances when
 /// `widened.from` names why (its first stages already run when `widened.start` holds them). `wider_curve` is
 /// set when f's shape alone stopped at its bound and the widened nuisance-only refit, not `none`, leaves at
 /// most DiagnosisOptions::wider_curve_excess of the held-out excess the ordinary one leaves: to whom the
 /// caller offers a widened diagnosis, begun.
-DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<Series>& data,
-                               const DiagnosisOptions& options, WideStart widened, WideStart* wider_curve) {
+PassOutcome diagnosis_pass(const HammersteinModel& model, const std::vector<Series>& data,
+                           const DiagnosisOptions& options, WideStart widened, WideStart* wider_curve) {
   PassState st;
   st.shape_tried = !widened.from.empty();
   st.o = st.shape_tried ? widened_tolerances(options) : options;
@@ -491,12 +519,13 @@ DiagnosisResult diagnosis_pass(const HammersteinModel& model, const std::vector<
     begun.reset();
     if (!p.none && st.o.widen_off_nominal && st.widened_from.empty() && !st.shape_tried) {
       if (widen_whole_pass(st, p, options)) continue;
-      if (auto none = try_wider_curve(st, p, model, data, options, wider_curve)) return std::move(*none);
+      if (auto none = try_wider_curve(st, p, model, data, options, wider_curve)) return {std::move(*none)};
     }
     p.res.nominal_refit.widened_from = st.widened_from;
-    if (!p.none && !fit_and_decide(st, p, data, widened.ordinary_fits)) continue;
+    const auto fit = p.none ? FitOutcome::decided : fit_and_decide(st, p, data, widened);
+    if (fit == FitOutcome::at_another_delay) continue;
     p.res.simulations = st.earlier_simulations + p.problem.simulations();
-    return std::move(p.res);
+    return {std::move(p.res), fit == FitOutcome::decided};
   }
 }
 
@@ -513,17 +542,17 @@ bool widened_predicts_better(const DiagnosisResult& ordinary, const DiagnosisRes
 DiagnosisResult diagnose(const HammersteinModel& model, const std::vector<Series>& data, const DiagnosisOptions& options) {
   check_inputs(model, data);
   WideStart wider_curve;
-  DiagnosisResult ordinary = diagnosis_pass(model, data, options, {}, &wider_curve);
+  DiagnosisResult ordinary = diagnosis_pass(model, data, options, {}, &wider_curve).res;
   if (wider_curve.from.empty()) return ordinary;
   DiagnosisOptions second = options;  // its stages told apart from the first run's
   if (options.progress)
     second.progress = [tell = options.progress](std::string_view stage, std::size_t done, std::size_t total) {
       tell("with a wider curve: " + std::string(stage), done, total);
     };
-  wider_curve.ordinary_fits = &ordinary.candidates;
-  DiagnosisResult wide = diagnosis_pass(model, data, second, std::move(wider_curve), nullptr);
+  wider_curve.ordinary = &ordinary;
+  auto [wide, decided] = diagnosis_pass(model, data, second, std::move(wider_curve), nullptr);
   wide.simulations += ordinary.simulations;
-  if (!widened_predicts_better(ordinary, wide, options)) {
+  if (!decided || !widened_predicts_better(ordinary, wide, options)) {
     ordinary.simulations = wide.simulations;
     return ordinary;
   }

@@ -21,6 +21,7 @@
 #include "control/text_format.hpp"
 #include "daemon/daemon_config.hpp"
 #include "tools/diagnose_suite.hpp"
+#include "tools/parallel_for.hpp"
 #include "tools/recording.hpp"
 
 namespace pvcgel::tools {
@@ -518,6 +519,38 @@ TEST(DiagnoseWithheldSecond, ASaturationBesideFsShapeAtItsBoundIsNamedWhenAWider
       EffectKind::saturation);
 }
 
+TEST(DiagnoseIndependentCases, AWiderCurveWhoseSingleEffectsCannotWinStopsBeforeItsPairsWithTheSameAnswer) {
+  // Case 214 again: f's shape stops at its bound, so a second diagnosis runs with a wider curve. Its best
+  // single effect is no better than the ordinary one's, so it stops before its pairs; with its pairs run
+  // the ordinary diagnosis stood all the same, and the answer is the one it was.
+  DiagnoseArgs a;
+  const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/pair_beats_wider_nominal/";
+  a.model = dir + "model.toml";
+  a.recordings = {dir + "rec0.csv", dir + "rec1.csv"};
+  const auto model = load_model(a.model);
+  const auto recordings = load_recordings(a, model);
+  auto options = diagnosis_options(a, model);
+  std::vector<std::string> stages;
+  options.progress = [&stages](std::string_view stage, std::size_t done, std::size_t total) {
+    if (done == total) stages.emplace_back(stage);
+  };
+  const auto stopped = control::diagnosis::diagnose(model.model, recordings.data, options);
+  const auto joined = [&stages] { return join(stages, "; "); };
+  EXPECT_NE(joined().find("with a wider curve: candidate fits"), std::string::npos) << joined();
+  EXPECT_EQ(joined().find("with a wider curve: pair fits"), std::string::npos) << joined();
+  stages.clear();
+  options.stop_wide_without_better_single = false;
+  const auto full = control::diagnosis::diagnose(model.model, recordings.data, options);
+  EXPECT_NE(joined().find("with a wider curve: pair fits"), std::string::npos) << joined();
+  EXPECT_FALSE(full.nominal_refit.widened());
+  EXPECT_EQ(stopped.verdict, full.verdict);
+  ASSERT_EQ(stopped.mixture.size(), full.mixture.size());
+  for (size_t i = 0; i < full.mixture.size(); ++i) EXPECT_EQ(stopped.mixture[i].kind, full.mixture[i].kind);
+  EXPECT_EQ(stopped.fitted.rmse_validation_um, full.fitted.rmse_validation_um);
+  EXPECT_EQ(stopped.ambiguous_with, full.ambiguous_with);
+  EXPECT_LT(stopped.simulations, full.simulations);
+}
+
 TEST(DiagnoseIndependentCases, AWidenedNuisanceRefitStartsFromTheOrdinaryOneToo) {
   // Case 95 of the evaluation set, cut to 20 s (tests/data/wide_refit_from_narrow/README.md): the static
   // curve is far off, so the tolerances widen. From the nominal alone the wide refit stepped f's shape to
@@ -777,6 +810,35 @@ TEST(DiagnoseIndependentSuite, AnAmbiguousAnswerHoldingTheTruthIsCountedAsSuch) 
   EXPECT_NE(log.str().find("ambiguous with: creep"), std::string::npos) << log.str();
   EXPECT_NE(text.find("single effects answered as ambiguous: 1 (the verdict right in 0; the truth among the other names in 1)"),
             std::string::npos) << text;
+}
+
+TEST(DiagnoseIndependentSuite, TheSlowestCasesAreTimedAgainAloneOnEveryCore) {
+  // Two jobs share the cores, so each case fits on a share of them; the slowest case is diagnosed again
+  // alone, on every core, with the same answer. One job: the suite's times are already alone.
+  namespace fs = std::filesystem;
+  const auto suite = temp_dir("retime_suite");
+  for (const char* c : {"case000", "case001"}) {
+    fs::create_directories(suite / c);
+    for (const char* f : {"model.toml", "rec0.csv"})
+      fs::copy_file(fs::path(PVCGEL_SOURCE_DIR) / "tests/data/ambiguous_creep_loop" / f, suite / c / f,
+                    fs::copy_options::overwrite_existing);
+  }
+  std::ofstream(suite / "labels.csv") << "case,effects,dominant\ncase000,hysteresis,hysteresis\ncase001,hysteresis,hysteresis\n";
+  std::ostringstream log;
+  const auto r = run_directory_suite(suite.string(), 2, log, 0, 1);
+  const auto text = format_directory_suite(r);
+  ASSERT_EQ(r.alone_s.size(), 1u) << log.str();
+  EXPECT_EQ(r.alone_threads, threads_per_job(1));
+  EXPECT_EQ(r.threads_per_case, threads_per_job(2));
+  EXPECT_EQ(r.alone_answer_changed, 0) << log.str();
+  EXPECT_GT(r.alone_s.front().second, 0.0);
+  EXPECT_NE(log.str().find(r.alone_s.front().first + " again alone on"), std::string::npos) << log.str();
+  EXPECT_NE(text.find("time per case (2 at once, each on"), std::string::npos) << text;
+  EXPECT_NE(text.find("the 1 slowest again, one at a time on"), std::string::npos) << text;
+  std::ostringstream alone_log;
+  const auto one_job = run_directory_suite(suite.string(), 1, alone_log, 0, 1);
+  EXPECT_TRUE(one_job.alone_s.empty());
+  EXPECT_EQ(format_directory_suite(one_job).find("slowest again"), std::string::npos);
 }
 
 TEST(DiagnoseIndependentSuite, AParamsFieldThatIsNotJsonIsRefusedNamingTheRow) {
