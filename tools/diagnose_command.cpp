@@ -327,18 +327,15 @@ std::string effect_tables_toml(const std::vector<Effect>& effects, const std::st
 
 }  // namespace
 
-std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, double sample_time_s,
-                                 const std::string& comment) {
+namespace {
+
+/// The augmented model's opening comment: the diagnosis's own (`comment`), then what the tables below are
+/// and how the refit that goes with the effects changed the file's nominal model.
+std::string augmented_header(const LoadedModel& lm, const DiagnosisResult& r, const std::string& comment) {
   const auto& nr = r.nominal_refit;
   std::ostringstream s;
   std::istringstream in(comment);
   for (std::string line; std::getline(in, line);) s << "# " << line << "\n";
-  const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
-  // The effects' parameters were fitted jointly with this refit: they describe the rig only together with it.
-  auto refit = refit_model(lm.model, nr.time_scale, nr.poly_shape, nr.poly_next);
-  std::vector<double> poly = refit.f.coefficients();
-  for (double& c : poly) c *= nr.gain;
-  refit.f = control::OddPolynomial(poly);
   s << "#\n# [model] is what the controller uses: the model file's nominal model with the refit the diagnosis made\n"
     << "# (overall gain x " << number_or_null(nr.gain, "%.4g") << ", G's time constants x " << number_or_null(nr.time_scale, "%.4g")
     << ", f's nonlinear coefficients x " << number_or_null(nr.poly_shape, "%.4g")
@@ -356,26 +353,26 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
     s << "# io_delay_samples: not declared in the model file; estimated " << number_or_null(r.alignment.io_delay_samples, "%.3g")
       << " samples from the data (rounded here).\n";
   if (!lm.other_tables.empty()) s << "# The model file's other tables follow [model] unchanged.\n";
-  // With the gain in f, the effects' parameters in um scale with it (those in V, s or shares do not).
-  std::vector<Effect> effects;
-  for (const auto& e : r.mixture) effects.push_back(with_displacement_scaled(e, nr.gain));
-  const std::string model_keys = "poly = " + toml_array(poly) + "\nG_num = " + toml_array(refit.G.num()) +
-                                 "\nG_den = " + toml_array(refit.G.den()) + "\n";
-  s << "\n[model]\n" << model_keys << "io_delay_samples = " << io << "\n";
-  if (r.mixture.empty()) s << "\n# No effect to compensate (verdict: " << r.verdict << ").\n";
-  s << effect_tables_toml(effects, "model.effect") << "\n";
-  if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
-  if (lm.other_tables.find("[controller]") == std::string::npos) {
-    // The loop, and so the sim backend, at the recordings' period: io_delay_samples counts in it, and a
-    // mode above 0.4x the default 1 kHz (a 10 kHz piezo's) is out of range at 1 kHz.
-    s << "# The recordings' sample time: the sim backend runs at it.\n[controller]\nperiod_s = "
-      << number_or_null(sample_time_s, "%.9g") << "\n";
-    // The controller's default upper limit (1000 V) is past f's turnover: keep it on the monotone part.
-    if (const auto turn = refit.f.first_turnover(1000.0))
-      s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\nvoltage_max_V = "
-        << number_or_null(std::floor(0.99 * *turn), "%.0f") << "\n";
-    s << "\n";
-  }
+  return s.str();
+}
+
+/// A [controller] table for a model file without one: the loop, and so the sim backend, at the recordings'
+/// period (io_delay_samples counts in it, and a mode above 0.4x the default 1 kHz, a 10 kHz piezo's, is out
+/// of range at 1 kHz), its upper limit below a turnover of f (the default 1000 V may be past it).
+std::string controller_table(const control::HammersteinModel& refit, double sample_time_s) {
+  std::ostringstream s;
+  s << "# The recordings' sample time: the sim backend runs at it.\n[controller]\nperiod_s = "
+    << number_or_null(sample_time_s, "%.9g") << "\n";
+  if (const auto turn = refit.f.first_turnover(1000.0))
+    s << "# f turns over at " << number_or_null(*turn, "%.1f") << " V: the controller must stay below it.\nvoltage_max_V = "
+      << number_or_null(std::floor(0.99 * *turn), "%.0f") << "\n";
+  return s.str() + "\n";
+}
+
+/// [sim] (the estimated noise, the built-in effects off) and [sim.truth]: the refitted model, `model_keys`,
+/// with the diagnosed effects.
+std::string sim_tables(const DiagnosisResult& r, int io, const std::string& model_keys, const std::vector<Effect>& effects) {
+  std::ostringstream s;
   s << "[sim]\nio_delay_samples = " << io << "\nnoise_sigma_um = " << number_or_null(r.noise_sigma_um, "%.4g")
     << "\nquantization_um = 0.0\n\n"
     << "# The rig's built-in Bouc-Wen hysteresis and creep are off: the diagnosed effects replace them.\n"
@@ -383,6 +380,32 @@ std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r
   s << "[sim.truth]\n" << model_keys;
   if (r.mixture.empty()) s << "\n# No effect added (verdict: " << r.verdict << ").\n";
   s << effect_tables_toml(effects, "sim.truth.effect");
+  return s.str();
+}
+
+}  // namespace
+
+std::string augmented_model_toml(const LoadedModel& lm, const DiagnosisResult& r, double sample_time_s,
+                                 const std::string& comment) {
+  const auto& nr = r.nominal_refit;
+  const int io = lm.io_delay_declared ? lm.io_delay_samples : static_cast<int>(std::lround(r.alignment.used_samples));
+  // The effects' parameters were fitted jointly with this refit: they describe the rig only together with it.
+  auto refit = refit_model(lm.model, nr.time_scale, nr.poly_shape, nr.poly_next);
+  std::vector<double> poly = refit.f.coefficients();
+  for (double& c : poly) c *= nr.gain;
+  refit.f = control::OddPolynomial(poly);
+  // With the gain in f, the effects' parameters in um scale with it (those in V, s or shares do not).
+  std::vector<Effect> effects;
+  for (const auto& e : r.mixture) effects.push_back(with_displacement_scaled(e, nr.gain));
+  const std::string model_keys = "poly = " + toml_array(poly) + "\nG_num = " + toml_array(refit.G.num()) +
+                                 "\nG_den = " + toml_array(refit.G.den()) + "\n";
+  std::ostringstream s;
+  s << augmented_header(lm, r, comment) << "\n[model]\n" << model_keys << "io_delay_samples = " << io << "\n";
+  if (r.mixture.empty()) s << "\n# No effect to compensate (verdict: " << r.verdict << ").\n";
+  s << effect_tables_toml(effects, "model.effect") << "\n";
+  if (!lm.other_tables.empty()) s << lm.other_tables << "\n\n";
+  if (lm.other_tables.find("[controller]") == std::string::npos) s << controller_table(refit, sample_time_s);
+  s << sim_tables(r, io, model_keys, effects);
   return s.str();
 }
 
