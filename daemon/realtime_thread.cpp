@@ -58,8 +58,11 @@ RealtimeReport prepare_process(const RealtimeConfig& cfg) {
   return r;
 }
 
-void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats, RecordRing& records,
-                       LatestRecord& latest, RealtimeReport& report, std::atomic<bool>& started) {
+namespace {
+
+/// SCHED_FIFO at cfg.priority and the CPU pin, on the calling thread, before its loop starts (not the RT path:
+/// a refusal is a warning in `report`, and the loop runs best effort).
+void claim_realtime_thread(const RealtimeConfig& cfg, RealtimeReport& report) {
   sched_param sp{};
   sp.sched_priority = cfg.priority;
   const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
@@ -77,6 +80,13 @@ void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatist
     if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) == 0) report.pinned = true;
     else report.warnings += "CPU affinity to " + std::to_string(cfg.cpu) + " refused; ";
   }
+}
+
+}  // namespace
+
+void run_realtime_loop(ControlLoop& loop, const RealtimeConfig& cfg, LoopStatistics& stats, RecordRing& records,
+                       LatestRecord& latest, RealtimeReport& report, std::atomic<bool>& started) {
+  claim_realtime_thread(cfg, report);
   prefault_stack();
   started.store(true, std::memory_order_release);
 
