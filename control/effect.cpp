@@ -350,8 +350,13 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
     case EffectKind::asymmetric_dynamics:
       // slow_pole_only as for bias_dependent_dynamics: a gel whose slow (viscoelastic) relaxation alone
       // depends on the direction of motion, its fast pole not.
+      // rise_share: where the nominal stands between the two directions. The ratio of the two speeds is
+      // 1 + relaxation_slowdown; rising runs (1 + relaxation_slowdown)^-rise_share times slower, relaxing
+      // (1 + relaxation_slowdown)^(1 - rise_share). 0 (the default, the earlier form): the nominal is the
+      // rising direction's; 1: the relaxing direction's, the rise alone off (a nominal identified on falls).
       return {{"relaxation_slowdown", -0.7, 2.5, false, {-0.2, 0.2, 0.6}},
-              {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true}};
+              {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true},
+              {"rise_share", 0.0, 1.0, false, {0.0, 1.0}, 0.0}};
     case EffectKind::slew_limit:
       // From a slow amplifier to one that moves the whole recorded span in a tenth of a sample.
       // digital: 0 an analog amplifier ramping inside the sample, 1 a digital limiter on the held command
@@ -443,10 +448,14 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
 
 namespace {
 
-/// The time scales G is discretised at: 1 alone, 1 and 1 + kappa (asymmetric dynamics), or 41 log-spaced over
-/// 1/4..4 with 1 exact at index 20 (bias-dependent dynamics, interpolated between neighbours).
-std::vector<double> time_scale_grid(EffectKind time_scaling, double relaxation_slowdown) {
-  if (time_scaling == EffectKind::asymmetric_dynamics) return {1.0, 1.0 + relaxation_slowdown};
+/// The time scales G is discretised at: 1 alone, rising and relaxing (asymmetric dynamics: their ratio 1 + kappa,
+/// split by rise_share), or 41 log-spaced over 1/4..4 with 1 exact at index 20 (bias-dependent dynamics,
+/// interpolated between neighbours).
+std::vector<double> time_scale_grid(EffectKind time_scaling, const std::array<double, kMaxEffectParams>& asymmetric) {
+  if (time_scaling == EffectKind::asymmetric_dynamics) {
+    const double ratio = 1.0 + asymmetric[0], rise_share = asymmetric[2];
+    return {std::pow(ratio, -rise_share), std::pow(ratio, 1.0 - rise_share)};
+  }
   if (time_scaling != EffectKind::bias_dependent_dynamics) return {1.0};
   std::vector<double> grid;
   for (size_t i = 0; i <= kGridLastIndex; ++i)
@@ -480,7 +489,7 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
                                                   has(EffectKind::resonance), p(EffectKind::resonance)),
                                      "model.G");
   if (ss.order() > kMaxOrder) throw ConfigError("model.G", "order above " + std::to_string(kMaxOrder));
-  scale_grid_ = time_scale_grid(time_scaling_, p(EffectKind::asymmetric_dynamics)[0]);
+  scale_grid_ = time_scale_grid(time_scaling_, p(EffectKind::asymmetric_dynamics));
   const std::string slow_key = "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only";
   const auto slow = !slow_only ? SlowMode{}
                     : in_parts ? slow_mode_in_parts(g_own, model.G, ss.order(), slow_key)

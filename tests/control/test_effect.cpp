@@ -358,6 +358,22 @@ TEST(AugmentedPlant, AsymmetricDynamicsSlowsTheRelaxation) {
   EXPECT_NEAR(y_dn[2000], y0_dn[1000], 0.05 * (y0_dn[0] - y0_dn[1000]));
 }
 
+TEST(AugmentedPlant, AsymmetricDynamicsWithTheNominalOnTheRelaxationSlowsTheRise) {
+  // rise_share 1: the same ratio of speeds (relaxing 1 + kappa = 0.5 times rising's time scale), with the
+  // nominal the relaxing direction's: rising runs twice as slow, relaxing at the nominal.
+  const auto up = steps(20000, 100.0, 400.0), down = steps(20000, 400.0, 100.0);
+  const Effect e{EffectKind::asymmetric_dynamics, {-0.5, 0.0, 1.0}};
+  const auto y_dn = run(e, down, 400.0), y0_dn = run({}, down, 400.0);
+  EXPECT_NEAR(y_dn[3000], y0_dn[3000], 1e-9);
+  const auto y_up = run(e, up, 100.0), y0_up = run({}, up, 100.0);
+  EXPECT_LT(y_up[1000], y0_up[1000] - 1.0);
+  EXPECT_NEAR(y_up[2000], y0_up[1000], 0.05 * (y0_up[1000] - y0_up[0]));
+  // Halfway (rise_share 0.5): each direction sqrt(2) off the nominal, the rise slower, the relaxation faster.
+  const Effect half{EffectKind::asymmetric_dynamics, {-0.5, 0.0, 0.5}};
+  EXPECT_LT(run(half, up, 100.0)[1000], y0_up[1000] - 0.5);
+  EXPECT_LT(run(half, down, 400.0)[1000], y0_dn[1000] - 0.5);
+}
+
 TEST(AugmentedPlant, SlewLimitRampsTheVoltage) {
   const Effect e{EffectKind::slew_limit, {1000.0}};
   const auto y = run(e, steps(3000, 200.0, 300.5), 200.0);

@@ -574,6 +574,20 @@ TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop)
   EXPECT_GT(r.mixture[0].p[0], 0.0) << "relaxation_slowdown: the relaxation is the slower\n" << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, AsymmetricDynamicsWithTheRiseAloneOffTheNominal) {
+  // A case of the independent generator (tests/data/asymmetric_rise_off_nominal/README.md): rising runs 1.86
+  // times slower than the nominal, falling at it. With the nominal held on the rising direction that was
+  // beyond the refit's tolerance on G's time scale, and the verdict was `unexplained`.
+  const auto o = diagnose_data("asymmetric_rise_off_nominal", "model.toml", {"rec0.csv", "rec1.csv", "rec2.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "asymmetric_dynamics") << o.summary;
+  ASSERT_FALSE(r.mixture.empty()) << o.summary;
+  ASSERT_EQ(r.mixture[0].kind, EffectKind::asymmetric_dynamics) << o.summary;
+  EXPECT_NEAR(r.mixture[0].p[0], 0.537 - 1.0, 0.05) << "relaxation_slowdown: the label's ratio of speeds\n" << o.summary;
+  EXPECT_GT(r.mixture[0].p[2], 0.5) << "rise_share: the nominal nearer the relaxation's speed\n" << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
   // A case of the independent generator (tests/data/bias_about_a_centre/README.md): the slow pole moves with
   // the displacement, recorded between about 75 and 125 um. Centred at zero, the form needed G's time
