@@ -588,6 +588,18 @@ TEST(DiagnoseIndependentCases, AsymmetricDynamicsWithTheRiseAloneOffTheNominal) 
   EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, ANoneWhoseNuisanceRefitACandidateImprovedIsNone) {
+  // A `none` of the independent generator (tests/data/none_from_leader/README.md): the nuisance-only refit
+  // stopped at 1.6x the noise; the delay candidate, its delay at 0, reached the noise with its own refit and
+  // was the verdict. Made again from the leader's nominal, the nuisance-only refit passes the `none` test.
+  const auto o = diagnose_data("none_from_leader", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "none") << o.summary;
+  EXPECT_TRUE(r.mixture.empty()) << o.summary;
+  EXPECT_LT(r.nominal_refit.errors.rmse_um, 1.1 * r.noise_sigma_um) << o.summary;
+  EXPECT_NE(r.explanation.find("started from delay's joint fit"), std::string::npos) << r.explanation;
+}
+
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
   // A case of the independent generator (tests/data/bias_about_a_centre/README.md): the slow pole moves with
   // the displacement, recorded between about 75 and 125 um. Centred at zero, the form needed G's time
