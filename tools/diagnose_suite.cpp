@@ -387,10 +387,6 @@ void tally(DirectorySuiteResult& r, const LabelledCase& c, const CaseOutcome& o)
   if (o.verdict == c.dominant) add_ratios(r, o);
 }
 
-}  // namespace
-
-namespace {
-
 /// The `count` slowest of `out` diagnosed again one at a time on every core (run_directory_suite).
 void retime_alone(DirectorySuiteResult& r, const std::string& dir, const std::vector<LabelledCase>& cases,
                   const std::vector<CaseOutcome>& out, int count, std::ostream& log) {

@@ -182,6 +182,10 @@ namespace {
 
 /// Localisation: windows whose residual RMS exceeds `ratio` times the noise, merged into mismatch windows.
 void locate(DiagnosisResult& res, const std::vector<Series>& data, double sigma, double ratio, const DiagnosisOptions& o) {
+  res.mismatch.clear();  // a refit made again (none_from_leader) locates again
+  res.window_centre_s.clear();
+  res.window_rms_um.clear();
+  res.window_recording.clear();
   for (size_t r = 0; r < data.size(); ++r) {
     const auto& s = data[r];
     const size_t w = window_samples(s, o);
@@ -500,10 +504,6 @@ bool none_from_leader(PassStart& p, const std::vector<Series>& data, const Diagn
   start.next = std::clamp(start.next, -o.poly_next_tolerance, o.poly_next_tolerance);
   const Nominal k = refit_nominal(p.problem, o, start);
   DiagnosisResult trial = p.res;  // the alignment, baseline and candidates kept; the refit's part made again
-  trial.mismatch.clear();
-  trial.window_centre_s.clear();
-  trial.window_rms_um.clear();
-  trial.window_recording.clear();
   auto refit = record_refit(trial, p.problem, data, o, k);
   if (!(trial.nominal_refit.errors.rmse_um < p.res.nominal_refit.errors.rmse_um) || !decide_none(trial, refit, o))
     return false;
