@@ -466,7 +466,9 @@ std::string extension_json(const DiagnosisResult& r) {
   for (size_t i = 0; i < a.offset_um.size(); ++i) j << (i ? ", " : "") << number_or_null(a.offset_um[i]);
   j << "], \"initial_V\": [";
   for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << number_or_null(a.initial_V[i]);
-  j << "], \"note\": " << quoted(a.note) << "},\n";
+  const double noise_um2 = r.noise_sigma_um * r.noise_sigma_um;
+  j << "], \"declared_delay_excess_noise_variances\": "
+    << number_or_null(noise_um2 > 0.0 ? a.declared_excess_sse_um2 / noise_um2 : NAN, "%.3g") << ", \"note\": " << quoted(a.note) << "},\n";
   const auto& n = r.nominal_refit;
   j << "  \"baseline_aligned\": {\"rmse_um\": " << number_or_null(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.aligned.rmse_fit_um)
     << ", \"rmse_validation_um\": " << number_or_null(r.aligned.rmse_validation_um) << "},\n";
@@ -480,7 +482,8 @@ std::string extension_json(const DiagnosisResult& r) {
   j << "  \"none_test\": {\"false_alarm_rate\": " << number_or_null(t.false_alarm_rate) << ", \"windows\": " << t.windows
     << ", \"worst_window_ratio\": " << number_or_null(t.worst_window_ratio) << ", \"window_threshold\": " << number_or_null(t.window_threshold)
     << ", \"ljung_box_q\": " << number_or_null(t.whiteness_q) << ", \"ljung_box_threshold\": " << number_or_null(t.whiteness_threshold)
-    << ", \"level_ok\": " << (t.level_ok ? "true" : "false") << ", \"white\": " << (t.white ? "true" : "false") << "}";
+    << ", \"level_ok\": " << (t.level_ok ? "true" : "false") << ", \"white\": " << (t.white ? "true" : "false")
+    << ", \"longer_delay_pending\": " << (t.longer_delay_pending ? "true" : "false") << "}";
   return j.str();
 }
 

@@ -55,6 +55,7 @@ struct DelayEstimate {
   double samples = 0.0;
   int used = 0;
   bool tie_lowered = false;  ///< the best whole delay fitted within kFlatMse of one less: the smaller is used
+  std::vector<double> sse_um2;  ///< the fit's squared error at each whole delay searched
 };
 
 /// The I/O delay that fits best over 0..max_d samples, jointly with the nuisance refit of the nominal model
@@ -72,7 +73,8 @@ DelayEstimate search_delay(Problem& p, int max_d, const DiagnosisOptions& o) {
     mse[d] = fit_mse(own, {}, refit_nominal(own, o));
   });
   const auto best = static_cast<size_t>(std::min_element(mse.begin(), mse.end()) - mse.begin());
-  DelayEstimate e{static_cast<double>(best), static_cast<int>(best)};
+  DelayEstimate e{static_cast<double>(best), static_cast<int>(best), false, {}};
+  for (double m : mse) e.sse_um2.push_back(m * static_cast<double>(p.fit_samples()));
   if (best > 0 && mse[best - 1] <= (1.0 + kFlatMse) * mse[best]) e.used = static_cast<int>(best) - 1, e.tie_lowered = true;
   if (best == 0 || best == mse.size() - 1) return e;
   const double m0 = mse[best - 1], m1 = mse[best], m2 = mse[best + 1];
@@ -132,7 +134,6 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
     p.set_initial(trial);
     return start_errors(p, data, window, k)[r];
   };
-  constexpr double kStartGain = 25.0;
   constexpr int kBits = 24, kMaxIterations = 40;
   const auto level = window_level(data, o);
   for (size_t r = 0; r < data.size(); ++r) {
@@ -149,13 +150,14 @@ bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisO
     std::uintmax_t iterations = kMaxIterations;
     const auto [best_V, best_error] = boost::math::tools::brent_find_minima(
         [&](double v) { return error_at(r, v); }, from - reach, from + reach, kBits, iterations);
-    // Kept only when the first window fits clearly better (by 25 noise variances; where the start hardly
+    // Kept only when the first window fits clearly better (kClearlyBetterNoiseVariances; where the start hardly
     // matters, a dead zone about it or a start at rest, the search fits the noise) and the start alone then
     // explains it (within the `none` test's `WindowLevel`): beside an effect the start trades for it
     // (a large creep's onset), and held fixed it would spoil the effect's fit.
     const double variance = std::pow(estimate_noise_sigma(data[r].y_um), 2), n = static_cast<double>(window[r]);
     const bool explained = best_error <= n * variance * level.threshold(n, o);
-    if (explained && best_error < error_at(r, starts[r]) - kStartGain * variance) starts[r] = best_V, refined = true;
+    if (explained && best_error < error_at(r, starts[r]) - kClearlyBetterNoiseVariances * variance)
+      starts[r] = best_V, refined = true;
   }
   p.set_initial(starts);
   return refined;
@@ -174,6 +176,8 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
   // The analysis runs with whole samples (what a model file and the daemon can hold); the sub-sample
   // estimate is reported.
   a.used_samples = o.io_delay_declared ? o.io_delay_samples : delay.used;
+  if (o.io_delay_declared && a.io_delay_samples >= o.io_delay_samples + 0.5)
+    a.longer_delay_sse_um2 = delay.sse_um2[static_cast<size_t>(std::lround(a.io_delay_samples))];
   a.note = alignment_note(a, max_d, !o.io_delay_declared && delay.tie_lowered);
   p.set_delay(a.used_samples);
   a.initial_V = p.initial();

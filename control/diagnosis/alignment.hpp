@@ -13,6 +13,13 @@
 
 namespace pvcgel::control::diagnosis::detail {
 
+/// How much less squared error (in noise variances) a fit's nuisance choice, a start state or a longer
+/// I/O delay, must leave to count as evidence: far above chance for one parameter (chi-squared with one
+/// degree of freedom exceeds 25 with probability 6e-7), and above the few noise variances a `none`
+/// recording's nominal error moves between neighbouring delays (at most 7.8 over the 100 `none`
+/// recordings of seed 31 and the fresh sets' `none` answers, 2026-11-30).
+inline constexpr double kClearlyBetterNoiseVariances = 25.0;
+
 /// Refines each recording's start state on its first window with the nominal refitted as `k`; returns
 /// whether any moved.
 bool refine_starts(Problem& p, const std::vector<Series>& data, const DiagnosisOptions& o, Nominal k);

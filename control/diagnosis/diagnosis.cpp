@@ -272,6 +272,10 @@ Prediction record_refit(DiagnosisResult& res, Problem& problem, const std::vecto
   r.poly_next = problem.next_coefficient(k.next, k.shape);
   r.errors = errors_of(data, refit.y, res.held_out);
   r.at_bounds = refit_at_bounds(r, o, false);
+  auto& a = res.alignment;
+  if (std::isfinite(a.longer_delay_sse_um2))
+    a.declared_excess_sse_um2 =
+        std::max(0.0, fit_mse(problem, {}, k) * static_cast<double>(problem.fit_samples()) - a.longer_delay_sse_um2);
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <functional>
 #include <map>
@@ -152,6 +153,12 @@ struct Alignment {
   std::vector<double> offset_um;        ///< sensor offset per recording (measured minus model at rest)
   std::vector<double> initial_V;        ///< the rest voltage each recording's simulation starts from
   std::string note;                     ///< a plain sentence when estimate and file disagree
+  /// The squared error (um^2, over the fitted samples) of the nuisance-only refit at the whole delay
+  /// estimated, when that is longer than the declared one; NaN otherwise.
+  double longer_delay_sse_um2 = NAN;
+  /// How much more squared error the nuisance-only refit at the delay in use leaves than that (um^2): the
+  /// evidence for a delay beyond the file's that the refit's G time scale may otherwise absorb.
+  double declared_excess_sse_um2 = 0.0;
 };
 
 /// The bounded refit of the nominal model: overall gain, G's time scale and f's shape within
@@ -188,6 +195,9 @@ struct NoneTest {
   double window_threshold = 0.0;   ///< its threshold at the corrected level
   double whiteness_q = 0.0, whiteness_threshold = 0.0;  ///< largest Ljung-Box statistic over recordings and its threshold
   bool level_ok = true, white = true;
+  /// Passed, but a longer I/O delay than the file's fitted clearly better (Alignment::declared_excess_sse_um2):
+  /// the candidates judged it before `none` was decided.
+  bool longer_delay_pending = false;
 };
 
 /// A one-sided test that model b predicts the held-out data better than model a.

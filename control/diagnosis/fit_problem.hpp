@@ -163,6 +163,8 @@ class Problem {
   [[nodiscard]] const HammersteinModel& model() const noexcept { return model_; }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
+  /// The samples a fit's residual covers (every recording's, but the held-out ones).
+  [[nodiscard]] size_t fit_samples() const noexcept { return n_fit_; }
   void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
   /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
   /// hysteresis see it. Empty: virgin.

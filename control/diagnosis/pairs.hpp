@@ -35,6 +35,10 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
 std::vector<std::string> refit_at_bounds_with(double gain, Nominal k, std::span<const Effect> effects,
                                               const DiagnosisOptions& o);
 
+/// The block length held-out comparisons of fits on this rig average over: o.significance_block_s, or ten
+/// of G's slowest time constants (at the time scale of `k`) when that is shorter.
+double pair_block_s(const Problem& problem, Nominal k, const DiagnosisOptions& o);
+
 /// Whether both effects of `pair` are named; orders the pair dominant first.
 bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std::vector<Series>& data,
                 const Excess& excess, const DiagnosisOptions& o);

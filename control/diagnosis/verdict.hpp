@@ -11,7 +11,8 @@
 
 namespace pvcgel::control::diagnosis::detail {
 
-/// `none` when the nuisance-only refit passes the `none` test; fills the verdict if so.
+/// `none` when the nuisance-only refit passes the `none` test and no longer I/O delay than the file's
+/// fits clearly better; fills the verdict if so.
 bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions& o);
 
 /// The verdict from the fitted candidates, judged against the nuisance-only refit.

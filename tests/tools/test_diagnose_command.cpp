@@ -277,7 +277,8 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   for (const char* key : {"\"mixture\": [{\"name\": \"hysteresis\"", "\"ambiguous_with\": [", "\"alignment\": {\"io_delay_samples\": ",
                           "\"declared\": null", "\"offset_um\": ", "\"at_bounds\": [", "\"widened\": false",
                           "\"widened_from\": []", "\"withheld_second_effect\": ", "\"candidates_judged_on\": \"held_out\"",
-                          "\"second_effect_test\": "})
+                          "\"second_effect_test\": ", "\"declared_delay_excess_noise_variances\": 0,",
+                          "\"longer_delay_pending\": false"})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
   // The augmented model keeps the user's [controller] table and the sim backend accepts it.
   const auto text = read(o.augmented_model_path);
@@ -598,6 +599,27 @@ TEST(DiagnoseIndependentCases, ANoneWhoseNuisanceRefitACandidateImprovedIsNone) 
   EXPECT_TRUE(r.mixture.empty()) << o.summary;
   EXPECT_LT(r.nominal_refit.errors.rmse_um, 1.1 * r.noise_sigma_um) << o.summary;
   EXPECT_NE(r.explanation.find("started from delay's joint fit"), std::string::npos) << r.explanation;
+}
+
+TEST(DiagnoseIndependentCases, ADelayBeyondTheDeclaredThatGsTimeScaleAbsorbsIsNamed) {
+  // A delay of the independent generator (tests/data/longer_delay_than_declared/README.md): 1.1 ms beyond
+  // the declared 2 samples at 1 kHz. The nuisance-only refit passes the `none` test with G 12% slower, but
+  // the delay search fits clearly better at 3 samples over both recordings, so the candidates judge it.
+  const auto o = diagnose_data("longer_delay_than_declared", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  EXPECT_TRUE(r.none_test.level_ok) << o.summary;
+  EXPECT_TRUE(r.none_test.longer_delay_pending) << o.summary;
+  EXPECT_GT(r.alignment.declared_excess_sse_um2, 25.0 * r.noise_sigma_um * r.noise_sigma_um) << o.summary;
+  EXPECT_EQ(r.verdict, "delay") << o.summary;
+  ASSERT_EQ(r.mixture.size(), 1U) << o.summary;
+  EXPECT_NEAR(r.mixture[0].p[0], 1.1e-3, 0.3e-3) << "extra_delay_s: the label's\n" << o.summary;
+  EXPECT_NE(r.explanation.find("noise variances less squared error"), std::string::npos) << r.explanation;
+  // One sine alone cannot tell the delay from a slower G: the search's gain stays under the bar.
+  const auto alone = diagnose_data("longer_delay_than_declared", "model.toml", {"rec0.csv"});
+  EXPECT_EQ(alone.result.verdict, "none") << alone.summary;
+  EXPECT_FALSE(alone.result.none_test.longer_delay_pending) << alone.summary;
+  EXPECT_LT(alone.result.alignment.declared_excess_sse_um2, 25.0 * alone.result.noise_sigma_um * alone.result.noise_sigma_um)
+      << alone.summary;
 }
 
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
