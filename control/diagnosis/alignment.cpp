@@ -55,7 +55,7 @@ struct DelayEstimate {
   double samples = 0.0;
   int used = 0;
   bool tie_lowered = false;  ///< the best whole delay fitted within kFlatMse of one less: the smaller is used
-  std::vector<double> sse_um2;  ///< the fit's squared error at each whole delay searched
+  std::vector<double> sse_um2;  ///< the fit's squared error (over the fitted samples) at each whole delay searched
 };
 
 /// The I/O delay that fits best over 0..max_d samples, jointly with the nuisance refit of the nominal model
@@ -67,17 +67,19 @@ struct DelayEstimate {
 /// 0.07% when its short recordings were held out in three stretches), and `leading_delay` still tries the
 /// other with the leading candidates.
 DelayEstimate search_delay(Problem& p, int max_d, const DiagnosisOptions& o) {
-  std::vector<double> mse(static_cast<size_t>(max_d) + 1);
-  run_each("delay search", mse.size(), p, o, [&](size_t d, Problem& own) {
+  DelayEstimate e;
+  auto& sse = e.sse_um2;
+  sse.resize(static_cast<size_t>(max_d) + 1);
+  run_each("delay search", sse.size(), p, o, [&](size_t d, Problem& own) {
     own.set_delay(static_cast<double>(d));
-    mse[d] = fit_mse(own, {}, refit_nominal(own, o));
+    sse[d] = own.residual({}, refit_nominal(own, o)).squaredNorm();
   });
-  const auto best = static_cast<size_t>(std::min_element(mse.begin(), mse.end()) - mse.begin());
-  DelayEstimate e{static_cast<double>(best), static_cast<int>(best), false, {}};
-  for (double m : mse) e.sse_um2.push_back(m * static_cast<double>(p.fit_samples()));
-  if (best > 0 && mse[best - 1] <= (1.0 + kFlatMse) * mse[best]) e.used = static_cast<int>(best) - 1, e.tie_lowered = true;
-  if (best == 0 || best == mse.size() - 1) return e;
-  const double m0 = mse[best - 1], m1 = mse[best], m2 = mse[best + 1];
+  const auto best = static_cast<size_t>(std::min_element(sse.begin(), sse.end()) - sse.begin());
+  e.samples = static_cast<double>(best);
+  e.used = static_cast<int>(best);
+  if (best > 0 && sse[best - 1] <= (1.0 + kFlatMse) * sse[best]) e.used = static_cast<int>(best) - 1, e.tie_lowered = true;
+  if (best == 0 || best == sse.size() - 1) return e;
+  const double m0 = sse[best - 1], m1 = sse[best], m2 = sse[best + 1];
   const double curv = m0 - 2.0 * m1 + m2;
   if (curv > kFlatMse * m1) e.samples += std::clamp(0.5 * (m0 - m2) / curv, -0.5, 0.5);
   return e;
@@ -176,8 +178,11 @@ Alignment estimate_alignment(Problem& p, const std::vector<Series>& data, const 
   // The analysis runs with whole samples (what a model file and the daemon can hold); the sub-sample
   // estimate is reported.
   a.used_samples = o.io_delay_declared ? o.io_delay_samples : delay.used;
-  if (o.io_delay_declared && a.io_delay_samples >= o.io_delay_samples + 0.5)
-    a.longer_delay_sse_um2 = delay.sse_um2[static_cast<size_t>(std::lround(a.io_delay_samples))];
+  if (o.io_delay_declared && a.io_delay_samples >= o.io_delay_samples + 0.5) {
+    const auto longer = delay.sse_um2.begin() + o.io_delay_samples + 1;
+    const auto best = std::min_element(longer, delay.sse_um2.end());
+    a.longer_delay = Alignment::LongerDelay{static_cast<int>(best - delay.sse_um2.begin()), *best};
+  }
   a.note = alignment_note(a, max_d, !o.io_delay_declared && delay.tie_lowered);
   p.set_delay(a.used_samples);
   a.initial_V = p.initial();
@@ -193,6 +198,7 @@ Alignment realign(Problem& p, Alignment a, int delay_samples, const std::string&
            "a leading candidate (" + leader + ") the data take " + std::to_string(delay_samples) +
            ", which the analysis uses (an unmodelled effect pulls the nominal model's delay)";
   a.used_samples = delay_samples;
+  if (a.declared != delay_samples) a.longer_delay.reset();  // the evidence is against the declared delay
   p.set_delay(a.used_samples);
   p.set_initial(a.initial_V);
   return a;

@@ -272,10 +272,9 @@ Prediction record_refit(DiagnosisResult& res, Problem& problem, const std::vecto
   r.poly_next = problem.next_coefficient(k.next, k.shape);
   r.errors = errors_of(data, refit.y, res.held_out);
   r.at_bounds = refit_at_bounds(r, o, false);
+  r.fit_sse_um2 = problem.residual({}, k).squaredNorm();
   auto& a = res.alignment;
-  if (std::isfinite(a.longer_delay_sse_um2))
-    a.declared_excess_sse_um2 =
-        std::max(0.0, fit_mse(problem, {}, k) * static_cast<double>(problem.fit_samples()) - a.longer_delay_sse_um2);
+  a.declared_excess_sse_um2 = a.longer_delay ? std::max(0.0, r.fit_sse_um2 - a.longer_delay->sse_um2) : 0.0;
   res.noise_sigma_um = noise_sigma(data, refit.y);
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
@@ -499,18 +498,16 @@ bool wide_cannot_win(const WideStart& widened, const PassStart& p, const Diagnos
 bool none_from_leader(PassStart& p, const std::vector<Series>& data, const DiagnosisOptions& o) {
   const auto& leader = p.res.candidates.front();
   if (!leader.fitted) return false;
-  // The leader's nominal within the nuisance-only refit's bounds (a loop's G may be faster than they allow).
-  Nominal start = nominal_of(leader);
-  const auto [time_lo, time_hi] = time_scale_bounds(o);
-  const auto [shape_lo, shape_hi] = poly_shape_bounds(o);
-  start.time_scale = std::clamp(start.time_scale, time_lo, time_hi);
-  start.shape = std::clamp(start.shape, shape_lo, shape_hi);
-  start.next = std::clamp(start.next, -o.poly_next_tolerance, o.poly_next_tolerance);
-  const Nominal k = refit_nominal(p.problem, o, start);
+  // Clamped into the nuisance-only refit's bounds by FitSpace::z_of (a loop's G may be faster than they allow).
+  const Nominal k = refit_nominal(p.problem, o, nominal_of(leader));
   DiagnosisResult trial = p.res;  // the alignment, baseline and candidates kept; the refit's part made again
   auto refit = record_refit(trial, p.problem, data, o, k);
-  if (!(trial.nominal_refit.errors.rmse_um < p.res.nominal_refit.errors.rmse_um) || !decide_none(trial, refit, o))
+  if (!(trial.nominal_refit.errors.rmse_um < p.res.nominal_refit.errors.rmse_um)) return false;
+  if (!decide_none(trial, refit, o)) {
+    // It passes the `none` test but a longer delay fits clearly better: decide judges that against this refit.
+    if (trial.none_test.longer_delay_pending) p.res = std::move(trial), p.k = k;
     return false;
+  }
   trial.explanation += "; this nuisance-only refit started from " + std::string(to_string(leader.effect.kind)) +
                        "'s joint fit, a better optimum than the one from the nominal model (residual " +
                        format("%.3g", p.res.nominal_refit.errors.rmse_um) + " um)";
@@ -528,7 +525,7 @@ FitOutcome fit_and_decide(PassState& st, PassStart& p, const std::vector<Series>
   const auto* ordinary_fits = widened.ordinary ? &widened.ordinary->candidates : nullptr;
   const WarmStarts warm = st.second ? WarmStarts{&st.second->candidates, "candidate fits at the new delay"}
                                     : WarmStarts{ordinary_fits, "candidate fits from the ordinary run's", kRegriddedLeaders};
-  fit_candidates(p.res, p.problem, data, p.scale, st.o, p.problem.residual({}, p.k).squaredNorm(), warm);
+  fit_candidates(p.res, p.problem, data, p.scale, st.o, p.res.nominal_refit.fit_sse_um2, warm);
   if (const auto d = st.second ? std::nullopt : leading_delay(p.res, p.problem, data, p.scale, st.o)) {
     st.second = SecondPass{p.res.alignment, p.res.candidates, d->delay_samples, d->candidate};
     st.earlier_simulations += p.problem.simulations();
@@ -561,7 +558,9 @@ PassOutcome diagnosis_pass(const HammersteinModel& model, const std::vector<Seri
   for (;;) {
     PassStart p = begun ? *std::move(begun) : start_pass(model, data, st.o, st.second, st.narrow);
     begun.reset();
-    if (!p.none && st.o.widen_off_nominal && st.widened_from.empty() && !st.shape_tried) {
+    // A refit that passed the `none` test but for a longer delay (longer_delay_pending) is not widened.
+    const bool off_nominal = !p.none && !p.res.none_test.longer_delay_pending;
+    if (off_nominal && st.o.widen_off_nominal && st.widened_from.empty() && !st.shape_tried) {
       if (widen_whole_pass(st, p, options)) continue;
       if (auto none = try_wider_curve(st, p, model, data, options, wider_curve)) return {std::move(*none)};
     }

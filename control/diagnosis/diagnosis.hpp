@@ -153,11 +153,17 @@ struct Alignment {
   std::vector<double> offset_um;        ///< sensor offset per recording (measured minus model at rest)
   std::vector<double> initial_V;        ///< the rest voltage each recording's simulation starts from
   std::string note;                     ///< a plain sentence when estimate and file disagree
-  /// The squared error (um^2, over the fitted samples) of the nuisance-only refit at the whole delay
-  /// estimated, when that is longer than the declared one; NaN otherwise.
-  double longer_delay_sse_um2 = NAN;
-  /// How much more squared error the nuisance-only refit at the delay in use leaves than that (um^2): the
-  /// evidence for a delay beyond the file's that the refit's G time scale may otherwise absorb.
+  /// The delay search's best fit at a whole delay longer than the declared one, each with its own
+  /// nuisance refit, when the estimate is longer than declared (empty otherwise, and in a pass at another
+  /// delay than the declared one).
+  struct LongerDelay {
+    int samples = 0;
+    double sse_um2 = 0.0;  ///< squared error over the fitted samples
+  };
+  std::optional<LongerDelay> longer_delay;
+  /// How much more squared error the nuisance-only refit at the declared delay leaves than longer_delay's
+  /// (um^2, 0 without one): the evidence for a delay beyond the file's that G's refitted time scale may
+  /// otherwise absorb.
   double declared_excess_sse_um2 = 0.0;
 };
 
@@ -169,6 +175,7 @@ struct NominalRefit {
   double poly_next_slope = 0.0;  ///< f's added odd term: its slope at the largest |u| over f's mean slope there
   double poly_next = 0.0;        ///< its coefficient (of x^(2n+1), n = the nominal's number of terms)
   ModelErrors errors;
+  double fit_sse_um2 = 0.0;      ///< the nuisance-only refit's squared error over the fitted samples
   /// The parameters above that stop at their tolerance (refit_at_bounds), by JSON key: those fitted with
   /// the named effects when there are any, else the nuisance-only refit's.
   std::vector<std::string> at_bounds;

@@ -89,17 +89,19 @@ struct FitSpace {
         spec.fixed = true;
       }
   }
-  /// z of given effects (kinds in this order) and time scale.
+  /// z of given effects (kinds in this order) and nominal refit, each parameter clamped into its bounds: a
+  /// start from another space (a loop's faster G, a wider pass's f) beyond them would sit where to_p's clamp
+  /// is flat, and the fit could not move it.
   [[nodiscard]] Eigen::VectorXd z_of(const std::vector<Effect>& e, Nominal k) const {
     Eigen::VectorXd z(static_cast<Eigen::Index>(specs.size()));
+    const auto inside = [&](size_t i, double p) { return to_z(i, std::clamp(p, specs[i].lower, specs[i].upper)); };
     for (size_t n = 0; n < kinds.size(); ++n)
-      for (size_t i = first[n]; i < end_of(n); ++i)
-        z(static_cast<Eigen::Index>(i)) = to_z(i, std::clamp(e[n].p[i - first[n]], specs[i].lower, specs[i].upper));
+      for (size_t i = first[n]; i < end_of(n); ++i) z(static_cast<Eigen::Index>(i)) = inside(i, e[n].p[i - first[n]]);
     if (time_scale) {
       const size_t n = specs.size();
-      z(z.size() - 3) = to_z(n - 3, k.time_scale);
-      z(z.size() - 2) = to_z(n - 2, k.shape);
-      z(z.size() - 1) = to_z(n - 1, k.next);
+      z(z.size() - 3) = inside(n - 3, k.time_scale);
+      z(z.size() - 2) = inside(n - 2, k.shape);
+      z(z.size() - 1) = inside(n - 1, k.next);
     }
     return z;
   }
@@ -163,8 +165,6 @@ class Problem {
   [[nodiscard]] const HammersteinModel& model() const noexcept { return model_; }
   void set_delay(double io) { io_ = io; }
   [[nodiscard]] double delay() const { return io_; }
-  /// The samples a fit's residual covers (every recording's, but the held-out ones).
-  [[nodiscard]] size_t fit_samples() const noexcept { return n_fit_; }
   void set_initial(std::vector<double> v) { initial_V_ = std::move(v); }
   /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
   /// hysteresis see it. Empty: virgin.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "control/diagnosis/alignment.hpp"
@@ -183,9 +184,9 @@ bool passes_none_test(const DiagnosisResult& res) {
   return res.none_test.level_ok && (res.none_test.white || refit_ms <= 1.1 * sigma * sigma);
 }
 
-/// How much less squared error a longer I/O delay than the file's leaves than the delay in use, both
-/// with the nuisance-only refit, in noise variances (0 when the estimate is not longer).
-double delay_evidence(const DiagnosisResult& res) {
+/// How much more squared error the nuisance-only refit at the declared delay leaves than the delay
+/// search's best longer delay, in noise variances (0 without one).
+double delay_evidence_noise_variances(const DiagnosisResult& res) {
   const double s2 = res.noise_sigma_um * res.noise_sigma_um;
   return res.alignment.declared_excess_sse_um2 > 0.0 ? res.alignment.declared_excess_sse_um2 / s2 : 0.0;
 }
@@ -195,6 +196,7 @@ void declare_none(DiagnosisResult& res, std::vector<std::vector<double>> y, cons
                   const std::string& why_not_delay) {
   res.verdict = "none";
   res.mixture.clear();
+  res.candidates_judged_on.clear();
   res.fitted = res.nominal_refit.errors;
   res.y_fitted_um = std::move(y);
   res.explanation = std::string(physical_meaning(EffectKind::none)) + ": residual RMS " +
@@ -206,41 +208,58 @@ void declare_none(DiagnosisResult& res, std::vector<std::vector<double>> y, cons
                     (res.none_test.white ? " and the residual is white" : "") + why_not_delay;
 }
 
+/// The single effect `c` as the verdict, with the held-out MSE it removes.
+void name_single(DiagnosisResult& res, Problem& problem, const CandidateResult& c, double removed_um2,
+                 const DiagnosisOptions& o) {
+  res.fitted = c.errors;
+  res.contribution = {removed_um2};
+  set_verdict(res, problem, {c.effect}, nominal_of(c), o);
+}
+
+/// Whether the leading candidate, a delay, predicts the held-out data better than the nuisance-only refit
+/// (one-sided, at the false-alarm rate): the test, else nothing.
+std::optional<HeldOutTest> delay_beats_refit(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
+                                             const DiagnosisOptions& o) {
+  const auto& best = res.candidates.front();
+  if (!best.nameable() || best.effect.kind != EffectKind::delay) return std::nullopt;
+  const auto refit_y = problem.predict({}, nominal_of(res.nominal_refit), true).y;
+  const auto y = problem.predict(std::vector<Effect>{best.effect}, nominal_of(best), true).y;
+  const double block_s = pair_block_s(problem, nominal_of(best), o);
+  auto t = held_out_improvement(data, refit_y, y, res.held_out, block_s, o.false_alarm_rate,
+                                0.01 * res.noise_sigma_um * res.noise_sigma_um);
+  if (!t.significant) return std::nullopt;
+  return t;
+}
+
 /// The `none` test passed but a longer delay than the file's fitted clearly better (decide_none), and no
 /// candidate met the ordinary bar: that bar is a share of the refit's excess over the noise, here little
 /// more than the noise estimate's own error. The verdict is then `delay` when it leads and predicts the
-/// held-out data better than the nuisance-only refit (one-sided, at the false-alarm rate), else `none`.
+/// held-out data better than the nuisance-only refit, else `none`.
 void decide_longer_delay(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                          const DiagnosisOptions& o) {
-  const auto& best = res.candidates.front();
-  auto refit_y = problem.predict({}, nominal_of(res.nominal_refit), true).y;
-  const std::string evidence = format("%.3g", delay_evidence(res)) + " noise variances less squared error with " +
-                               format("%.2g", res.alignment.io_delay_samples) + " samples of delay than with the " +
-                               format("%.0f", res.alignment.used_samples) + " declared";
-  if (best.nameable() && best.effect.kind == EffectKind::delay) {
-    const auto y = problem.predict(std::vector<Effect>{best.effect}, nominal_of(best), true).y;
-    const double block_s = pair_block_s(problem, nominal_of(best), o);
-    const auto t = held_out_improvement(data, refit_y, y, res.held_out, block_s, o.false_alarm_rate,
-                                        0.01 * res.noise_sigma_um * res.noise_sigma_um);
-    if (t.significant) {
-      const double time_scale_alone = res.nominal_refit.time_scale;
-      res.fitted = best.errors;
-      res.contribution = {t.mean_um2};
-      set_verdict(res, problem, {best.effect}, nominal_of(best), o);
-      explain_candidates(res);
-      res.explanation = "The nuisance-only refit reaches the sensor noise (" + format("%.3g", res.noise_sigma_um) +
-                        " um) only with G's time scale at " + format("%.3g", time_scale_alone) +
-                        ", but the data fit with " + evidence + ", and the delay predicts the held-out data better (t " +
-                        format("%.3g", t.t) + " against " + format("%.3g", t.threshold) + ", signed-rank p " +
-                        format("%.2g", t.signed_rank_p) + ", " + std::to_string(t.blocks) + " blocks): " + best.explanation +
-                        ". Over slow inputs a delay and a slower G look alike: a step or a sine near G's corner separates them";
-      return;
-    }
-  }
+  const auto& a = res.alignment;
+  const std::string evidence = format("%.3g", delay_evidence_noise_variances(res)) +
+                               " noise variances less squared error with " + std::to_string(a.longer_delay->samples) +
+                               " samples of delay than with the " + std::to_string(a.declared.value_or(0)) + " declared";
+  const double time_scale_alone = res.nominal_refit.time_scale;
   explain_candidates(res);
-  declare_none(res, std::move(refit_y), o,
-               "; the data fit with " + evidence + ", but no delay beyond the file's predicts the held-out data "
-               "better (the refit's G time scale takes it up)");
+  const auto& best = res.candidates.front();
+  if (const auto t = delay_beats_refit(res, problem, data, o)) {
+    name_single(res, problem, best, t->mean_um2, o);
+    res.candidates_judged_on = "held_out";
+    res.explanation = "The nuisance-only refit reaches the sensor noise (" + format("%.3g", res.noise_sigma_um) +
+                      " um) with G's time scale at " + format("%.3g", time_scale_alone) + ", but the data fit with " +
+                      evidence + ", and the delay predicts the held-out data better (t " + format("%.3g", t->t) +
+                      " against " + format("%.3g", t->threshold) + ", signed-rank p " + format("%.2g", t->signed_rank_p) +
+                      ", " + std::to_string(t->blocks) + " blocks): " + best.explanation +
+                      ". Over slow inputs a delay and a slower G look alike: a step or a sine near G's corner separates them";
+    return;
+  }
+  const std::string why = best.effect.kind == EffectKind::delay
+                              ? "the delay candidate does not predict the held-out data better than this refit"
+                              : "the leading candidate is " + std::string(to_string(best.effect.kind)) + ", not a delay";
+  declare_none(res, problem.predict({}, nominal_of(res.nominal_refit), true).y, o,
+               "; the data fit with " + evidence + ", but " + why);
 }
 
 }  // namespace
@@ -265,12 +284,11 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
     res.fitted = pair.errors;
     set_verdict(res, problem, pair.effects, pair.nominal, o);
   } else if (single_ok) {
-    res.fitted = best.errors;
-    res.contribution = {excess.base - excess(best.errors)};
     find_ambiguous(res, excess, o);
-    set_verdict(res, problem, {best.effect}, nominal_of(best), o);
+    name_single(res, problem, best, excess.base - excess(best.errors), o);
   } else if (res.none_test.longer_delay_pending) {
-    return decide_longer_delay(res, problem, data, o);
+    decide_longer_delay(res, problem, data, o);
+    return;
   } else {
     res.verdict = "unexplained";
   }
@@ -278,14 +296,14 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   res.explanation = explain_verdict(res, excess, pair_ok) + drift_without_hold_text(res, data);
 }
 
-/// `none` when the level test passes and the residual is white, or its excess is under a tenth of the
-/// noise variance (a correlated residual that small is not a material effect). Fills the verdict if so.
+/// `none` when the nuisance-only refit passes the `none` test (passes_none_test) and no longer delay than the
+/// file's fits clearly better. Fills the verdict if so.
 bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions& o) {
   if (!passes_none_test(res)) return false;
   // A transport delay beyond the file's passes the level test when G's refitted time scale stands in for it
   // (fresh seed 163: 0.72 ms at 5 kHz, G 24% slower): a longer delay, fitted with its own refit, leaving
   // clearly less error is evidence the time scale does not outweigh, so the candidates judge it first.
-  res.none_test.longer_delay_pending = delay_evidence(res) > kClearlyBetterNoiseVariances;
+  res.none_test.longer_delay_pending = delay_evidence_noise_variances(res) > kClearlyBetterNoiseVariances;
   if (res.none_test.longer_delay_pending) return false;
   declare_none(res, std::move(refit.y), o, "");
   return true;
