@@ -466,9 +466,8 @@ std::string extension_json(const DiagnosisResult& r) {
   for (size_t i = 0; i < a.offset_um.size(); ++i) j << (i ? ", " : "") << number_or_null(a.offset_um[i]);
   j << "], \"initial_V\": [";
   for (size_t i = 0; i < a.initial_V.size(); ++i) j << (i ? ", " : "") << number_or_null(a.initial_V[i]);
-  const double noise_um2 = r.noise_sigma_um * r.noise_sigma_um;
-  j << "], \"declared_delay_excess_noise_variances\": "
-    << number_or_null(noise_um2 > 0.0 ? a.declared_excess_sse_um2 / noise_um2 : NAN, "%.3g") << ", \"note\": " << quoted(a.note) << "},\n";
+  j << "], \"declared_delay_excess_noise_variances\": " << number_or_null(a.declared_delay_excess_noise_variances, "%.3g")
+    << ", \"note\": " << quoted(a.note) << "},\n";
   const auto& n = r.nominal_refit;
   j << "  \"baseline_aligned\": {\"rmse_um\": " << number_or_null(r.aligned.rmse_um) << ", \"rmse_fit_um\": " << number_or_null(r.aligned.rmse_fit_um)
     << ", \"rmse_validation_um\": " << number_or_null(r.aligned.rmse_validation_um) << "},\n";

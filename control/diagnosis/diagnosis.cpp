@@ -273,9 +273,10 @@ Prediction record_refit(DiagnosisResult& res, Problem& problem, const std::vecto
   r.errors = errors_of(data, refit.y, res.held_out);
   r.at_bounds = refit_at_bounds(r, o, false);
   r.fit_sse_um2 = problem.residual({}, k).squaredNorm();
-  auto& a = res.alignment;
-  a.declared_excess_sse_um2 = a.longer_delay ? std::max(0.0, r.fit_sse_um2 - a.longer_delay->sse_um2) : 0.0;
   res.noise_sigma_um = noise_sigma(data, refit.y);
+  auto& a = res.alignment;
+  a.declared_delay_excess_noise_variances =
+      a.longer_delay ? std::max(0.0, r.fit_sse_um2 - a.longer_delay->sse_um2) / std::pow(res.noise_sigma_um, 2) : 0.0;
   res.none_test = none_test(data, refit.y, res.noise_sigma_um, o);
   locate(res, data, res.noise_sigma_um, std::sqrt(res.none_test.window_threshold), o);
   return refit;

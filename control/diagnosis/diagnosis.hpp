@@ -161,10 +161,10 @@ struct Alignment {
     double sse_um2 = 0.0;  ///< squared error over the fitted samples
   };
   std::optional<LongerDelay> longer_delay;
-  /// How much more squared error the nuisance-only refit at the declared delay leaves than longer_delay's
-  /// (um^2, 0 without one): the evidence for a delay beyond the file's that G's refitted time scale may
-  /// otherwise absorb.
-  double declared_excess_sse_um2 = 0.0;
+  /// How much more squared error the nuisance-only refit at the declared delay leaves than longer_delay's,
+  /// in noise variances (0 without one): the evidence for a delay beyond the file's that G's refitted time
+  /// scale may otherwise absorb.
+  double declared_delay_excess_noise_variances = 0.0;
 };
 
 /// The bounded refit of the nominal model: overall gain, G's time scale and f's shape within
@@ -202,7 +202,7 @@ struct NoneTest {
   double window_threshold = 0.0;   ///< its threshold at the corrected level
   double whiteness_q = 0.0, whiteness_threshold = 0.0;  ///< largest Ljung-Box statistic over recordings and its threshold
   bool level_ok = true, white = true;
-  /// Passed, but a longer I/O delay than the file's fitted clearly better (Alignment::declared_excess_sse_um2):
+  /// Passed, but a longer I/O delay than the file's fitted clearly better (Alignment::declared_delay_excess_noise_variances):
   /// the candidates judged it before `none` was decided.
   bool longer_delay_pending = false;
 };

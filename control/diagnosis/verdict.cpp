@@ -184,13 +184,6 @@ bool passes_none_test(const DiagnosisResult& res) {
   return res.none_test.level_ok && (res.none_test.white || refit_ms <= 1.1 * sigma * sigma);
 }
 
-/// How much more squared error the nuisance-only refit at the declared delay leaves than the delay
-/// search's best longer delay, in noise variances (0 without one).
-double delay_evidence_noise_variances(const DiagnosisResult& res) {
-  const double s2 = res.noise_sigma_um * res.noise_sigma_um;
-  return res.alignment.declared_excess_sse_um2 > 0.0 ? res.alignment.declared_excess_sse_um2 / s2 : 0.0;
-}
-
 /// The verdict `none` with the nuisance-only refit's prediction `y`; `why_not_delay` ends the text.
 void declare_none(DiagnosisResult& res, std::vector<std::vector<double>> y, const DiagnosisOptions& o,
                   const std::string& why_not_delay) {
@@ -219,10 +212,9 @@ void name_single(DiagnosisResult& res, Problem& problem, const CandidateResult& 
 /// Whether the leading candidate, a delay, predicts the held-out data better than the nuisance-only refit
 /// (one-sided, at the false-alarm rate): the test, else nothing.
 std::optional<HeldOutTest> delay_beats_refit(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
-                                             const DiagnosisOptions& o) {
+                                             const std::vector<std::vector<double>>& refit_y, const DiagnosisOptions& o) {
   const auto& best = res.candidates.front();
   if (!best.nameable() || best.effect.kind != EffectKind::delay) return std::nullopt;
-  const auto refit_y = problem.predict({}, nominal_of(res.nominal_refit), true).y;
   const auto y = problem.predict(std::vector<Effect>{best.effect}, nominal_of(best), true).y;
   const double block_s = pair_block_s(problem, nominal_of(best), o);
   auto t = held_out_improvement(data, refit_y, y, res.held_out, block_s, o.false_alarm_rate,
@@ -238,13 +230,14 @@ std::optional<HeldOutTest> delay_beats_refit(const DiagnosisResult& res, Problem
 void decide_longer_delay(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                          const DiagnosisOptions& o) {
   const auto& a = res.alignment;
-  const std::string evidence = format("%.3g", delay_evidence_noise_variances(res)) +
+  const std::string evidence = format("%.3g", res.alignment.declared_delay_excess_noise_variances) +
                                " noise variances less squared error with " + std::to_string(a.longer_delay->samples) +
                                " samples of delay than with the " + std::to_string(a.declared.value_or(0)) + " declared";
   const double time_scale_alone = res.nominal_refit.time_scale;
+  auto refit_y = problem.predict({}, nominal_of(res.nominal_refit), true).y;
   explain_candidates(res);
   const auto& best = res.candidates.front();
-  if (const auto t = delay_beats_refit(res, problem, data, o)) {
+  if (const auto t = delay_beats_refit(res, problem, data, refit_y, o)) {
     name_single(res, problem, best, t->mean_um2, o);
     res.candidates_judged_on = "held_out";
     res.explanation = "The nuisance-only refit reaches the sensor noise (" + format("%.3g", res.noise_sigma_um) +
@@ -258,7 +251,7 @@ void decide_longer_delay(DiagnosisResult& res, Problem& problem, const std::vect
   const std::string why = best.effect.kind == EffectKind::delay
                               ? "the delay candidate does not predict the held-out data better than this refit"
                               : "the leading candidate is " + std::string(to_string(best.effect.kind)) + ", not a delay";
-  declare_none(res, problem.predict({}, nominal_of(res.nominal_refit), true).y, o,
+  declare_none(res, std::move(refit_y), o,
                "; the data fit with " + evidence + ", but " + why);
 }
 
@@ -303,7 +296,7 @@ bool decide_none(DiagnosisResult& res, Prediction& refit, const DiagnosisOptions
   // A transport delay beyond the file's passes the level test when G's refitted time scale stands in for it
   // (fresh seed 163: 0.72 ms at 5 kHz, G 24% slower): a longer delay, fitted with its own refit, leaving
   // clearly less error is evidence the time scale does not outweigh, so the candidates judge it first.
-  res.none_test.longer_delay_pending = delay_evidence_noise_variances(res) > kClearlyBetterNoiseVariances;
+  res.none_test.longer_delay_pending = res.alignment.declared_delay_excess_noise_variances > kClearlyBetterNoiseVariances;
   if (res.none_test.longer_delay_pending) return false;
   declare_none(res, std::move(refit.y), o, "");
   return true;

@@ -609,7 +609,7 @@ TEST(DiagnoseIndependentCases, ADelayBeyondTheDeclaredThatGsTimeScaleAbsorbsIsNa
   const auto& r = o.result;
   EXPECT_TRUE(r.none_test.level_ok) << o.summary;
   EXPECT_TRUE(r.none_test.longer_delay_pending) << o.summary;
-  EXPECT_GT(r.alignment.declared_excess_sse_um2, 25.0 * r.noise_sigma_um * r.noise_sigma_um) << o.summary;
+  EXPECT_GT(r.alignment.declared_delay_excess_noise_variances, 25.0) << o.summary;
   EXPECT_EQ(r.verdict, "delay") << o.summary;
   ASSERT_EQ(r.mixture.size(), 1U) << o.summary;
   EXPECT_NEAR(r.mixture[0].p[0], 1.1e-3, 0.3e-3) << "extra_delay_s: the label's\n" << o.summary;
@@ -618,8 +618,7 @@ TEST(DiagnoseIndependentCases, ADelayBeyondTheDeclaredThatGsTimeScaleAbsorbsIsNa
   const auto alone = diagnose_data("longer_delay_than_declared", "model.toml", {"rec0.csv"});
   EXPECT_EQ(alone.result.verdict, "none") << alone.summary;
   EXPECT_FALSE(alone.result.none_test.longer_delay_pending) << alone.summary;
-  EXPECT_LT(alone.result.alignment.declared_excess_sse_um2, 25.0 * alone.result.noise_sigma_um * alone.result.noise_sigma_um)
-      << alone.summary;
+  EXPECT_LT(alone.result.alignment.declared_delay_excess_noise_variances, 25.0) << alone.summary;
 }
 
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {

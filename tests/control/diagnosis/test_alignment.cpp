@@ -36,7 +36,7 @@ TEST(Alignment, AnUndeclaredDelayAStartNotAtRestAndAnOffsetAreNuisanceNotEffects
   EXPECT_NEAR(r.alignment.offset_um[0], 0.4, 0.05);
   // A silent file takes the estimate: there is no declared delay to hold a longer one against.
   EXPECT_FALSE(r.alignment.longer_delay);
-  EXPECT_EQ(r.alignment.declared_excess_sse_um2, 0.0);
+  EXPECT_EQ(r.alignment.declared_delay_excess_noise_variances, 0.0);
   // Declared as 1: the file is contradicted, and the extra sample is a delay effect.
   const auto d = diagnose(paper_model(3), {s});
   EXPECT_NE(d.alignment.note.find("declares io_delay_samples = 1"), std::string::npos) << d.alignment.note;
@@ -44,7 +44,7 @@ TEST(Alignment, AnUndeclaredDelayAStartNotAtRestAndAnOffsetAreNuisanceNotEffects
   // The search's best longer delay, against the nuisance-only refit at the declared one: far beyond chance.
   ASSERT_TRUE(d.alignment.longer_delay);
   EXPECT_EQ(d.alignment.longer_delay->samples, 2);
-  EXPECT_GT(d.alignment.declared_excess_sse_um2, 25.0 * d.noise_sigma_um * d.noise_sigma_um);
+  EXPECT_GT(d.alignment.declared_delay_excess_noise_variances, 25.0);
 }
 
 TEST(Alignment, TheRestBeforeTheFirstSampleIsFoundWhenNeitherTheFirstCommandNorTheFirstLevelGivesIt) {
