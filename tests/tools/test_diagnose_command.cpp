@@ -621,6 +621,21 @@ TEST(DiagnoseIndependentCases, ADelayBeyondTheDeclaredThatGsTimeScaleAbsorbsIsNa
   EXPECT_LT(alone.result.alignment.declared_delay_excess_noise_variances, 25.0) << alone.summary;
 }
 
+TEST(DiagnoseIndependentCases, ASecondEffectBehindAlternativesToTheLeaderIsFittedBesideIt) {
+  // A mixture of the independent generator (tests/data/alternatives_beside_leader/README.md): a 3 ms delay
+  // and falling 7% faster than rising. A creep and a mode, alternatives to the delay, took the runners-up's
+  // places, and the asymmetric dynamics was never fitted beside it: the verdict was the delay alone.
+  const auto o = diagnose_data("alternatives_beside_leader", "model.toml", {"rec0.csv", "rec1.csv", "rec2.csv"});
+  const auto& r = o.result;
+  EXPECT_EQ(r.verdict, "delay") << o.summary;
+  ASSERT_EQ(r.mixture.size(), 2U) << o.summary;
+  EXPECT_EQ(r.mixture[0].kind, EffectKind::delay) << o.summary;
+  EXPECT_NEAR(r.mixture[0].p[0], 3e-3, 1e-3) << "extra_delay_s: the label's\n" << o.summary;
+  ASSERT_EQ(r.mixture[1].kind, EffectKind::asymmetric_dynamics) << o.summary;
+  EXPECT_LT(r.mixture[1].p[0], 0.0) << "relaxation_slowdown: falling is the faster\n" << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
   // A case of the independent generator (tests/data/bias_about_a_centre/README.md): the slow pole moves with
   // the displacement, recorded between about 75 and 125 um. Centred at zero, the form needed G's time
