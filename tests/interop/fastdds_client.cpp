@@ -289,9 +289,12 @@ class Client final {
   }
 
   /// Replies received: commands accepted, chunks accepted, refusals (as the daemon counts them in Status).
+  /// A resent request is answered again but counted once by the daemon (DdsBridge::is_resend): so here.
   [[nodiscard]] std::string reply_counts() const {
     uint64_t commands = 0, chunks = 0, rejected = 0;
-    for (const auto& r : replies_) (r.accepted() ? (r.is_trajectory() ? chunks : commands) : rejected) += 1;
+    for (const auto& r : replies_)
+      if (first_reply(r.seq(), r.is_trajectory()) == &r)
+        (r.accepted() ? (r.is_trajectory() ? chunks : commands) : rejected) += 1;
     return "commands_accepted=" + std::to_string(commands) + " chunks_accepted=" + std::to_string(chunks) +
            " rejects_total=" + std::to_string(rejected);
   }

@@ -249,8 +249,8 @@ TEST(FastDdsInterop, TrajectoryFromFastDdsIsAcceptedAndExecuted) {
         << reply << "\n" << out;
 
   // Status (reliable, transient-local) from the daemon counts what the client
-  // sent as the replies did (normally 3 commands, 2 chunks, 0 refusals; more
-  // if the client had to send one again).
+  // sent as the replies did (3 commands, 2 chunks, 0 refusals; a request the
+  // client had to send again is answered again but counted once, by both).
   const auto counts = out.find("replies commands_accepted=");
   ASSERT_NE(counts, std::string::npos) << out;
   std::stringstream fields(out.substr(counts + 8, out.find('\n', counts) - counts - 8));
