@@ -382,7 +382,7 @@ void break_tie(DiagnosisResult& res, const DiagnosisOptions& o) {
   const Excess excess(res);
   const auto& a = res.candidates[0];
   const auto& b = res.candidates[1];
-  if (excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base && fit_segment_prefers(b, a, res, o, o.tie_fit_gain))
+  if (excess.ties(a.errors, b.errors, o) && fit_segment_prefers(b, a, res, o, o.tie_fit_gain))
     std::swap(res.candidates[0], res.candidates[1]);
 }
 

@@ -74,6 +74,11 @@ struct Excess {
   bool explained_by(const ModelErrors& e, const DiagnosisOptions& o) const {
     return base > 0.0 && (*this)(e) <= o.explained_excess * base;
   }
+  /// Whether a model with errors `other` leaves at most o.ambiguity_margin of the base excess more than one
+  /// with errors `leader`: the judging segment does not tell the two apart.
+  bool ties(const ModelErrors& leader, const ModelErrors& other, const DiagnosisOptions& o) const {
+    return (*this)(other) - (*this)(leader) <= o.ambiguity_margin * base;
+  }
   /// The ranking score: that MSE with a relative penalty per fitted parameter.
   double score(const ModelErrors& e, size_t parameters, const DiagnosisOptions& o) const {
     return mse(e) * (1.0 + o.penalty_per_parameter * static_cast<double>(parameters));

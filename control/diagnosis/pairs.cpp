@@ -34,15 +34,6 @@ bool slow_pole_beside_a_linear_part(const Effect& a, const Effect& b) {
   return (moves_slow_pole_only(a) && linear_part(b)) || (moves_slow_pole_only(b) && linear_part(a));
 }
 
-/// Whether runner-up `b` explains the held-out data as well as the leader `a`, within the ambiguity margin
-/// (find_ambiguous's test of the excess alone): another explanation of the same mismatch. Taking the
-/// runners-up's places, two such kept the second effect beside the leader out of the pairs: fresh seed
-/// 151's case011 (a creep and a mode standing in for a 27 ms delay, the bias-dependent dynamics beside it
-/// fifth) and seed 157's case018 (the same beside a delay, asymmetric dynamics fifth).
-bool an_alternative_to(const CandidateResult& a, const CandidateResult& b, const Excess& excess, const DiagnosisOptions& o) {
-  return excess(b.errors) - excess(a.errors) <= o.ambiguity_margin * excess.base;
-}
-
 /// A second effect's start: its grid point, and the nominal refit it scored best with.
 struct SecondStart {
   Effect effect;
@@ -191,7 +182,7 @@ void add_static_curve_plans(std::vector<PairPlan>& plans, const DiagnosisResult&
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
 /// leader's residual is weak) when not already among them, and those on G's slow pole alone beside creep or a
-/// mode and the alternatives to the leader (an_alternative_to) on the way. A forward kind whose own fit cannot run beside the leader
+/// mode and those that tie with the leader (Excess::ties) on the way. A forward kind whose own fit cannot run beside the leader
 /// in the form it chose (two effects that both change G's time scale) starts from its grid point alone. Then
 /// the mode at the leader's residual peaks, the kind that stands in for a moved time scale, and the static
 /// curves when f stopped at its tolerance.
@@ -216,12 +207,15 @@ std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, c
       else
         add(g.effect, {});
     }
-  // An alternative to the leader is fitted beside it without taking a runner-up's place, which a kind that
-  // explains something else then gets.
+  // A runner-up that ties with the leader (Excess::ties, as find_ambiguous judges) is another explanation of
+  // the same mismatch: fitted beside it without taking a runner-up's place, which a kind that explains
+  // something else then gets. Taking the places, two such kept the second effect out of the pairs: fresh
+  // seed 151's case011 (a creep and a mode standing in for a 27 ms delay, the bias-dependent dynamics
+  // beside it fifth) and seed 157's case018 (the same beside a delay, asymmetric dynamics fifth).
   const Excess excess(res);
   for (size_t i = 1, added = 0; i < res.candidates.size() && res.candidates[i].fitted && added < kPairsTried; ++i) {
     const CandidateResult& b = res.candidates[i];
-    if (slow_pole_beside_a_linear_part(a.effect, b.effect) || an_alternative_to(a, b, excess, o)) add(b.effect, {});
+    if (slow_pole_beside_a_linear_part(a.effect, b.effect) || excess.ties(a.errors, b.errors, o)) add(b.effect, {});
     else added += add(b.effect, {}) ? 1 : 0;
   }
   add_mode_plan(out, res, problem, data, scale, o);

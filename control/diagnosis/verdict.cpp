@@ -48,7 +48,7 @@ void find_ambiguous(DiagnosisResult& res, const Excess& excess, const DiagnosisO
   for (size_t i = 1; i < res.candidates.size(); ++i) {
     const auto& c = res.candidates[i];
     if (c.nameable() && excess.explained_by(c.errors, o) &&
-        excess(c.errors) - excess(best.errors) <= o.ambiguity_margin * excess.base &&
+        excess.ties(best.errors, c.errors, o) &&
         !fit_segment_prefers(best, c, res, o, o.ambiguity_fit_gain))
       res.ambiguous_with.emplace_back(to_string(c.effect.kind));
   }
