@@ -272,7 +272,7 @@ Prediction record_refit(DiagnosisResult& res, Problem& problem, const std::vecto
   r.poly_next = problem.next_coefficient(k.next, k.shape);
   r.errors = errors_of(data, refit.y, res.held_out);
   r.at_bounds = refit_at_bounds(r, o, false);
-  r.fit_sse_um2 = problem.residual({}, k).squaredNorm();
+  r.fit_sse_um2 = problem.fit_sse_um2(refit.y);
   res.noise_sigma_um = noise_sigma(data, refit.y);
   auto& a = res.alignment;
   a.declared_delay_excess_noise_variances =

@@ -355,6 +355,17 @@ Eigen::VectorXd Problem::residual(std::span<const Effect> e, Nominal k) {
   return out;
 }
 
+double Problem::fit_sse_um2(const std::vector<std::vector<double>>& y) const {
+  Eigen::VectorXd out(static_cast<Eigen::Index>(n_fit_));
+  Eigen::Index j = 0;
+  for (size_t r = 0; r < data_.size(); ++r)
+    for (const auto& [first, last] : fit_ranges_[r]) {
+      out.segment(j, static_cast<Eigen::Index>(last - first)) = segment(data_[r].y_um, first, last) - segment(y[r], first, last);
+      j += static_cast<Eigen::Index>(last - first);
+    }
+  return out.squaredNorm();
+}
+
 namespace {
 
 /// Takes the parameters that sit on a bound and whose descent direction points out of it out of the

@@ -198,6 +198,8 @@ class Problem {
 
   /// Fit-segment residual after the projection.
   Eigen::VectorXd residual(std::span<const Effect> e, Nominal k);
+  /// residual(e, k)'s squared norm from predict(e, k, ...)'s prediction `y` (the same numbers, no simulation).
+  [[nodiscard]] double fit_sse_um2(const std::vector<std::vector<double>>& y) const;
   [[nodiscard]] int simulations() const { return simulations_; }
   void add_simulations(int n) { simulations_ += n; }
   /// The coefficient c of f's added odd term c x^(2n+1) from its slope at the largest recorded |u|
