@@ -284,11 +284,18 @@ bool scored_right(const LabelledCase& c, const CaseOutcome& o) {
   return c.effects.find('+') == std::string::npos ? o.verdict == c.effects : names_both(o.mixture, c.effects);
 }
 
-/// "; beside LEADER: a, b, c": the second effects fitted beside the leader, the best pair's first (none fitted: "").
+/// "; beside LEADER: a, b, c; beside R: a": the second effects fitted beside each first effect, the best pair's
+/// first (the leader, and a runner-up in its place when the exchange step fitted one; none fitted: "").
 std::string seconds_tried(const SecondEffectTest& t) {
-  std::vector<std::string> seconds;
-  for (const PairTried& p : t.tried) seconds.push_back(p.effects[1]);
-  return t.tried.empty() ? "" : "; beside " + t.tried.front().effects[0] + ": " + join(seconds, ", ");
+  std::vector<std::pair<std::string, std::vector<std::string>>> beside;
+  for (const PairTried& p : t.tried) {
+    auto at = std::find_if(beside.begin(), beside.end(), [&](const auto& b) { return b.first == p.effects[0]; });
+    if (at == beside.end()) at = beside.insert(beside.end(), {p.effects[0], {}});
+    at->second.push_back(p.effects[1]);
+  }
+  std::string out;
+  for (const auto& [first, seconds] : beside) out += "; beside " + first + ": " + join(seconds, ", ");
+  return out;
 }
 
 /// One case's line: the truth, the verdict and mixture, the score, the held-out ratio, the time, the

@@ -1,7 +1,8 @@
 #pragma once
 /// @file
-/// Mixtures (internal): the leader fitted jointly with the most promising second effects, each member
-/// refitted alone, and the test that names both (each significant on held-out data and material).
+/// Mixtures (internal): the leader fitted jointly with the most promising second effects, the best pair's
+/// second beside runners-up in the leader's place (the exchange step), each member refitted alone, and the
+/// test that names both (each significant on held-out data and material).
 
 #include <span>
 #include <string>
@@ -23,7 +24,8 @@ struct PairFit {
   double score = INFINITY;
 };
 
-/// The best single effect fitted jointly with each of the most promising second effects: the best pair.
+/// The best single effect fitted jointly with each of the most promising second effects, then the best of
+/// those pairs' second effect beside the best runners-up in the leader's place: the best pair.
 PairFit best_pair(DiagnosisResult& res, Problem& problem, const std::vector<Series>& data, const DataScale& scale,
                   const DiagnosisOptions& o);
 
