@@ -218,7 +218,9 @@ struct HeldOutTest {
 
 /// One pair fitted jointly (SecondEffectTest::tried): how well it fits, and the score the best pair is chosen by.
 struct PairTried {
-  std::vector<std::string> effects;  ///< the leader, then the second effect fitted beside it
+  /// The leader, then the second effect fitted beside it; in the exchange step's pairs a runner-up in the
+  /// leader's place, then the best pair's second effect.
+  std::vector<std::string> effects;
   double rmse_fit_um = 0.0;
   double rmse_validation_um = 0.0;
   double score = 0.0;  ///< the judging segment's MSE with the per-parameter penalty (Excess::score)

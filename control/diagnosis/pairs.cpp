@@ -182,11 +182,11 @@ void add_static_curve_plans(std::vector<PairPlan>& plans, const DiagnosisResult&
 /// The pairs worth fitting: with o.forward_pairs, the forward selection's best second effects; then the
 /// three best fitted single runners-up that can run with the leader as fitted (a second effect large
 /// enough to nearly lead alone, which the leader's fit may have partly absorbed, so its evidence in the
-/// leader's residual is weak) when not already among them, and those on G's slow pole alone beside creep or a
-/// mode and those that tie with the leader (Excess::ties) on the way. A forward kind whose own fit cannot run beside the leader
-/// in the form it chose (two effects that both change G's time scale) starts from its grid point alone. Then
-/// the mode at the leader's residual peaks, the kind that stands in for a moved time scale, and the static
-/// curves when f stopped at its tolerance.
+/// leader's residual is weak) when not already among them, and those on G's slow pole alone beside creep
+/// or a mode and those that tie with the leader (Excess::ties) on the way. A forward kind whose own fit
+/// cannot run beside the leader in the form it chose (two effects that both change G's time scale) starts
+/// from its grid point alone. Then the mode at the leader's residual peaks, the kind that stands in for a
+/// moved time scale, and the static curves when f stopped at its tolerance.
 std::vector<PairPlan> pair_plans(const DiagnosisResult& res, Problem& problem, const std::vector<Series>& data,
                                  const DataScale& scale, const DiagnosisOptions& o) {
   const auto& a = res.candidates.front();
@@ -261,10 +261,11 @@ PairFit pair_fit_of(const FitSpace& space, const Eigen::VectorXd& z, DiagnosisRe
   p.errors = errors_of(data, pred.y, res.held_out);
   p.y = std::move(pred.y);
   p.score = Excess(res).score(p.errors, space.specs.size() - 1 - unused_parameters(p.effects), o);
-  if (std::any_of(p.effects.begin(), p.effects.end(), [&](const Effect& e) { return !unobserved_by(e, scale).empty(); }))
-    p.score = INFINITY;
-  res.second_effect_test.tried.push_back({{std::string(to_string(p.effects[0].kind)), std::string(to_string(p.effects[1].kind))},
-                                          p.errors.rmse_fit_um, p.errors.rmse_validation_um, p.score});
+  const auto unobserved = [&](const Effect& e) { return !unobserved_by(e, scale).empty(); };
+  if (std::any_of(p.effects.begin(), p.effects.end(), unobserved)) p.score = INFINITY;
+  const std::vector<std::string> names{std::string(to_string(p.effects[0].kind)),
+                                       std::string(to_string(p.effects[1].kind))};
+  res.second_effect_test.tried.push_back({names, p.errors.rmse_fit_um, p.errors.rmse_validation_um, p.score});
   return p;
 }
 
@@ -444,8 +445,7 @@ bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair,
   if (leader[0].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(leader[0].loop_memory);
   const Starts starts{{start_at(leader[0].effect, Nominal{leader[0].time_scale}, scale, wide, data)}};
   fit_each("leader with a wider nominal refit", leader, {0}, starts, res.held_out, problem, data, scale, wide);
-  const Excess excess(res);
-  return excess(leader[0].errors) - excess(pair.errors) > o.ambiguity_margin * excess.base;
+  return !Excess(res).ties(pair.errors, leader[0].errors, o);
 }
 
 }  // namespace
@@ -455,12 +455,11 @@ bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair,
 /// stand in for that error. On the tuning set and the ctest subset, three false second effects were dead
 /// zones beside f's shape at its bound; the true second effects at a bound (two delays, a loop) cannot
 /// imitate it. Asked only when the leader alone explains the excess; the data then decide
-/// (pair_beats_a_wider_nominal). Records the pair member that is not the leader (the smaller contributor when neither is) as withheld; returns whether
-/// it did.
+/// (pair_beats_a_wider_nominal). Records as withheld the pair member that is not the leader, or the smaller
+/// contributor when neither is (a pair exchanged in the leader's place: exchange_leader); returns whether it
+/// did.
 bool withhold_second(DiagnosisResult& res, const PairFit& pair, Problem& problem, const std::vector<Series>& data,
                      const DataScale& scale, const DiagnosisOptions& o) {
-  // The member that is not the leader; the smaller contributor when neither is (a pair exchanged in
-  // the leader's place: exchange_leader).
   const EffectKind lead = res.candidates.front().effect.kind;
   const EffectKind second = pair.effects[1].kind == lead ? pair.effects[0].kind : pair.effects[1].kind;
   std::vector<std::string> bounds;
