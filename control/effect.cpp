@@ -430,7 +430,7 @@ void validate(const Effect& e, double Ts, const std::string& key) {
 }
 
 void validate_mixture(std::span<const Effect> effects, const std::string& key) {
-  int count = 0, time_scaling = 0;
+  int count = 0;
   std::array<bool, kEffectKindNames.size()> seen{};
   for (const auto& e : effects) {
     if (e.kind == EffectKind::none) continue;
@@ -438,25 +438,25 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key) {
     if (seen[static_cast<size_t>(e.kind)])
       throw ConfigError(key, "effect '" + std::string(to_string(e.kind)) + "' given twice");
     seen[static_cast<size_t>(e.kind)] = true;
-    time_scaling += e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics;
   }
   if (count > kMaxEffects)
     throw ConfigError(key, "at most " + std::to_string(kMaxEffects) + " effects run together, got " + std::to_string(count));
-  if (time_scaling > 1)
-    throw ConfigError(key, "asymmetric_dynamics and bias_dependent_dynamics both change G's time scale: give one");
 }
 
 namespace {
 
-/// The time scales G is discretised at: 1 alone, rising and relaxing (asymmetric dynamics: their ratio 1 + kappa,
-/// split by rise_share), or 41 log-spaced over 1/4..4 with 1 exact at index 20 (bias-dependent dynamics,
-/// interpolated between neighbours).
-std::vector<double> time_scale_grid(EffectKind time_scaling, const std::array<double, kMaxEffectParams>& asymmetric) {
-  if (time_scaling == EffectKind::asymmetric_dynamics) {
-    const double ratio = 1.0 + asymmetric[0], rise_share = asymmetric[2];
-    return {std::pow(ratio, -rise_share), std::pow(ratio, 1.0 - rise_share)};
-  }
-  if (time_scaling != EffectKind::bias_dependent_dynamics) return {1.0};
+/// The time scales asymmetric dynamics run G at: rising, then relaxing (their ratio 1 + kappa, split by
+/// rise_share); 1 alone without it.
+std::vector<double> direction_scales(bool asymmetric, const std::array<double, kMaxEffectParams>& p) {
+  if (!asymmetric) return {1.0};
+  const double ratio = 1.0 + p[0], rise_share = p[2];
+  return {std::pow(ratio, -rise_share), std::pow(ratio, 1.0 - rise_share)};
+}
+
+/// The time scales bias-dependent dynamics run G at: 41 log-spaced over 1/4..4 with 1 exact at index 20
+/// (interpolated between neighbours); 1 alone without it.
+std::vector<double> bias_scales(bool bias_dependent) {
+  if (!bias_dependent) return {1.0};
   std::vector<double> grid;
   for (size_t i = 0; i <= kGridLastIndex; ++i)
     grid.push_back(std::exp(std::log(4.0) * (static_cast<double>(i) - kGridUnitIndex) / (2.0 * kGridStepsPerOctave)));
@@ -480,7 +480,10 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
   // f is held flat beyond its turnover (a real actuator does not reverse), on both signs.
   if (const auto turn = f_.first_turnover(1e9)) x_sat_ = *turn;
   // G's slow pole moved alone beside creep or a mode: a block realised in parts keeps G's states its own.
-  const bool slow_only = time_scaling_ != EffectKind::none && moves_slow_pole_only({time_scaling_, p(time_scaling_)});
+  const auto moves_slow_pole = [&](EffectKind k) { return has(k) && moves_slow_pole_only({k, p(k)}); };
+  const bool direction_slow = moves_slow_pole(EffectKind::asymmetric_dynamics);
+  const bool bias_slow = moves_slow_pole(EffectKind::bias_dependent_dynamics);
+  const bool slow_only = direction_slow || bias_slow;
   const bool in_parts = slow_only && (has(EffectKind::creep) || has(EffectKind::resonance));
   const auto g_own = in_parts ? realize(model.G, "model.G") : StateSpace{};
   const auto ss = in_parts ? realize_in_parts(model.G, g_own, has(EffectKind::creep), p(EffectKind::creep),
@@ -489,12 +492,12 @@ AugmentedPlant::AugmentedPlant(const HammersteinModel& model, double io_delay, d
                                                   has(EffectKind::resonance), p(EffectKind::resonance)),
                                      "model.G");
   if (ss.order() > kMaxOrder) throw ConfigError("model.G", "order above " + std::to_string(kMaxOrder));
-  scale_grid_ = time_scale_grid(time_scaling_, p(EffectKind::asymmetric_dynamics));
-  const std::string slow_key = "effect." + std::string(to_string(time_scaling_)) + ".slow_pole_only";
+  const auto slow_kind = direction_slow ? EffectKind::asymmetric_dynamics : EffectKind::bias_dependent_dynamics;
+  const std::string slow_key = "effect." + std::string(to_string(slow_kind)) + ".slow_pole_only";
   const auto slow = !slow_only ? SlowMode{}
                     : in_parts ? slow_mode_in_parts(g_own, model.G, ss.order(), slow_key)
                                : slow_mode(ss, model.G, slow_key);
-  discretise_grid(ss, slow_only, slow.dA, slow.dB);
+  discretise_grid(ss, direction_slow, bias_slow, slow.dA, slow.dB);
   linear_step_ = kLinearSteps[delay_fraction_ > 0.0 ? 1 : 0][static_cast<size_t>(ss.order())];
   set_gains(model);
   reset_steady_state(0.0);
@@ -507,22 +510,29 @@ void AugmentedPlant::take_effects(std::span<const Effect> effects) {
     validate(e, Ts_, "effect." + std::string(to_string(e.kind)));
     on_[static_cast<size_t>(e.kind)] = true;
     p_[static_cast<size_t>(e.kind)] = e.p;
-    if (e.kind == EffectKind::asymmetric_dynamics || e.kind == EffectKind::bias_dependent_dynamics) time_scaling_ = e.kind;
   }
 }
 
-void AugmentedPlant::discretise_grid(const StateSpace& ss, bool slow_only, const Eigen::MatrixXd& slow_dA,
-                                     const Eigen::VectorXd& slow_dB) {
-  const size_t unit = time_scaling_ == EffectKind::bias_dependent_dynamics ? kGridUnitIndex : 0;  // time scale 1
-  for (size_t g = 0; g < scale_grid_.size(); ++g) {
+void AugmentedPlant::discretise_grid(const StateSpace& ss, bool direction_slow, bool bias_slow,
+                                     const Eigen::MatrixXd& slow_dA, const Eigen::VectorXd& slow_dB) {
+  const auto rows = direction_scales(has(EffectKind::asymmetric_dynamics), p(EffectKind::asymmetric_dynamics));
+  const auto columns = bias_scales(has(EffectKind::bias_dependent_dynamics));
+  grid_columns_ = columns.size();
+  relaxing_row_ = rows.size() > 1;
+  // Time scale 1 for the rest state (asymmetric dynamics' rising row: scaling keeps the DC gain).
+  const size_t unit = columns.size() > 1 ? kGridUnitIndex : 0;
+  for (size_t g = 0; g < rows.size() * columns.size(); ++g) {
+    const double by_direction = rows[g / columns.size()], by_bias = columns[g % columns.size()];
+    // Each effect's scale goes to the part of G it moves: the slow mode alone, or the whole block (after).
+    const double slow_scale = (direction_slow ? by_direction : 1.0) * (bias_slow ? by_bias : 1.0);
+    const double whole_scale = (direction_slow ? 1.0 : by_direction) * (bias_slow ? 1.0 : by_bias);
     StateSpace scaled = ss;
-    if (slow_only) {
-      scaled.A += (1.0 / scale_grid_[g] - 1.0) * slow_dA;
-      scaled.B += (1.0 / scale_grid_[g] - 1.0) * slow_dB;
-    } else {
-      scaled.A /= scale_grid_[g];
-      scaled.B /= scale_grid_[g];
+    if (direction_slow || bias_slow) {
+      scaled.A += (1.0 / slow_scale - 1.0) * slow_dA;
+      scaled.B += (1.0 / slow_scale - 1.0) * slow_dB;
     }
+    scaled.A /= whole_scale;
+    scaled.B /= whole_scale;
     const auto d = discretize_zoh(scaled, Ts_);
     if (g == unit) {
       rest_lu_.compute(Matrix::Identity(d.A.rows(), d.A.cols()) - Matrix(d.A));
@@ -551,15 +561,14 @@ void AugmentedPlant::set_gains(const HammersteinModel& model) {
   for (Eigen::Index i = 0; i < rest_per_unit.size(); ++i) block_dc_gain_ += C_[static_cast<size_t>(i)] * rest_per_unit(i);
   saturate_drive_ = has(EffectKind::saturation) && p(EffectKind::saturation)[2] != 0.0 && dc_gain_ != 0.0;
   const double op_tau = p(EffectKind::bias_dependent_dynamics)[1];
-  if (time_scaling_ == EffectKind::bias_dependent_dynamics) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts_ / op_tau) : 1.0;
-  const double reference_um = time_scaling_ == EffectKind::bias_dependent_dynamics ? p(EffectKind::bias_dependent_dynamics)[2] : 0.0;
+  const bool bias_dependent = has(EffectKind::bias_dependent_dynamics);
+  if (bias_dependent) op_gain_ = op_tau > 0.0 ? 1.0 - std::exp(-Ts_ / op_tau) : 1.0;
+  const double reference_um = bias_dependent ? p(EffectKind::bias_dependent_dynamics)[2] : 0.0;
   y_ref_ = reference_um > 0.0 ? reference_um : std::max(std::abs(dc_gain_ * nonlinearity(500.0)), 1e-6);
   inverse_y_ref_ = 1.0 / y_ref_;
 }
 
-double AugmentedPlant::time_scale(double w) const noexcept {
-  // Relaxing: above where the whole block settles (with creep's slow gain, past G(0) w is still rising).
-  if (time_scaling_ == EffectKind::asymmetric_dynamics) return block_dc_gain_ * w < y_lin_ ? 1.0 : 0.0;  // grid index
+double AugmentedPlant::bias_time_scale() const noexcept {
   const auto& q = p(EffectKind::bias_dependent_dynamics);
   return std::clamp(1.0 + (q[0] * (y_op_ - q[5]) + q[3] * swing_) * inverse_y_ref_, 0.25, 4.0);
 }
@@ -630,17 +639,17 @@ void AugmentedPlant::apply(double u) noexcept { advance(u); }
 
   const double w = nonlinearity(x), dw = w_previous_ - w;
   w_previous_ = w;
-  if (scale_grid_.size() == 1) {
-    y_lin_ = (this->*linear_step_)(0, 1.0, w, dw);
-  } else if (time_scaling_ == EffectKind::asymmetric_dynamics) {
-    y_lin_ = (this->*linear_step_)(static_cast<size_t>(time_scale(w)), 1.0, w, dw);
+  // Relaxing: above where the whole block settles (with creep's slow gain, past G(0) w is still rising).
+  const size_t row = relaxing_row_ && block_dc_gain_ * w < y_lin_ ? grid_columns_ : 0;
+  if (grid_columns_ == 1) {
+    y_lin_ = (this->*linear_step_)(row, 1.0, w, dw);
   } else {
-    // Interpolate between the two neighbouring discretisations (log-spaced grid).
+    // Interpolate between the two neighbouring discretisations of the row (log-spaced grid).
     constexpr double kLastInterval = static_cast<double>(kGridLastIndex) - 1e-3;  // pos + 1 stays on the grid
-    const double pos = std::clamp(static_cast<double>(kGridUnitIndex) + table_log2(time_scale(w)) * kGridStepsPerOctave, 0.0, kLastInterval);
-    y_lin_ = (this->*linear_step_)(static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
+    const double pos = std::clamp(static_cast<double>(kGridUnitIndex) + table_log2(bias_time_scale()) * kGridStepsPerOctave, 0.0, kLastInterval);
+    y_lin_ = (this->*linear_step_)(row + static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
   }
-  if (time_scaling_ == EffectKind::bias_dependent_dynamics) {  // only its time scale reads them
+  if (grid_columns_ > 1) {  // only bias-dependent dynamics' time scale reads them
     swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
     y_op_ += op_gain_ * (y_lin_ - y_op_);
   }

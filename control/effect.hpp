@@ -271,7 +271,7 @@ std::string_view physical_meaning(EffectKind kind) noexcept;
 void validate(const Effect& effect, double sample_time_s, const std::string& key);
 
 /// Checks that `effects` can run together in one plant (at most kMaxEffects,
-/// no kind twice, at most one effect that changes G's time scale).
+/// no kind twice).
 /// @throws ConfigError naming `key`.
 void validate_mixture(std::span<const Effect> effects, const std::string& key);
 
@@ -318,6 +318,8 @@ void validate_mixture(std::span<const Effect> effects, const std::string& key);
 ///    depend on the bias), 0 (the default): all of G's time constants. Beside creep or a mode the slow pole is
 ///    G's own: the block then runs G, the creep branches and the mode as separate states (the same transfer
 ///    function), and only G's slow mode moves, the creep's and the mode's poles staying where they are.
+///  Asymmetric and bias-dependent dynamics together multiply their slowdowns, each on what it moves (G's slow
+///    mode or all of G): the grid holds the bias's time scales once per direction.
 /// Construction allocates; reset and stepping do not.
 class AugmentedPlant final {
  public:
@@ -369,7 +371,8 @@ class AugmentedPlant final {
     return saturate_drive_ ? saturated_drive(w, dc_gain_, p(EffectKind::saturation)) : w;
   }
   [[nodiscard]] double output_stage(double y_lin, long sample) const noexcept;
-  [[nodiscard]] double time_scale(double w) const noexcept;
+  /// Bias-dependent dynamics' time scale now (from the operating point and the swing about it).
+  [[nodiscard]] double bias_time_scale() const noexcept;
   /// x <- weight (A_i x + B_i w + E_i dw) + (1 - weight) (A_{i+1} x + B_{i+1} w + E_{i+1} dw): one grid entry,
   /// or two interpolated; returns C x + D w. dw is the previous drive minus w, E its share of the sample (the
   /// fractional delay's; without one, Fractional false leaves the term out of the hot loop). For the linear
@@ -389,9 +392,10 @@ class AugmentedPlant final {
   // Construction's stages (configuration time: they throw ConfigError).
   /// Validates the effects and records which run, with their parameters and the time-scaling one.
   void take_effects(std::span<const Effect> effects);
-  /// [A | B], C, D and E per time scale of scale_grid_, and the rest state's factorisation at time scale 1;
-  /// slow_only: only G's slow mode (slow_dA, slow_dB) is scaled, else the whole block.
-  void discretise_grid(const StateSpace& ss, bool slow_only, const Eigen::MatrixXd& slow_dA,
+  /// [A | B], C, D and E per grid entry (the time scales of asymmetric dynamics' direction times those of
+  /// bias-dependent dynamics), and the rest state's factorisation at time scale 1. Each effect scales what it
+  /// moves: with *_slow only G's slow mode (slow_dA, slow_dB), else the whole block.
+  void discretise_grid(const StateSpace& ss, bool direction_slow, bool bias_slow, const Eigen::MatrixXd& slow_dA,
                        const Eigen::VectorXd& slow_dB);
   /// G's and the block's DC gains, the drive-side saturation switch and bias-dependent dynamics' scales.
   void set_gains(const HammersteinModel& model);
@@ -403,7 +407,6 @@ class AugmentedPlant final {
 
   std::array<bool, kKinds> on_{};  ///< which effects run (at most kMaxEffects)
   std::array<std::array<double, kMaxEffectParams>, kKinds> p_{};
-  EffectKind time_scaling_ = EffectKind::none;  ///< asymmetric or bias-dependent dynamics, if either
   OddPolynomial f_;
   double x_sat_ = 1e300;
   bool saturate_drive_ = false;  ///< the saturation acts on G's input (on_drive), not on the displacement
@@ -416,7 +419,10 @@ class AugmentedPlant final {
   /// the first d of a sample, d the delay's fraction (zero without one).
   std::vector<std::array<double, kMaxOrder>> E_grid_;
   double w_previous_ = 0.0;  ///< the drive of the held value before the current one (fractional delay)
-  std::vector<double> scale_grid_;
+  /// The grid: a row per direction (asymmetric dynamics: rising, then relaxing; else one), each of grid_columns_
+  /// bias time scales (bias-dependent dynamics: 41; else one). Entry row * grid_columns_ + column.
+  size_t grid_columns_ = 1;
+  bool relaxing_row_ = false;  ///< asymmetric dynamics: a second row, G while relaxing
   std::array<double, kMaxOrder> C_{};
   double D_ = 0.0;
   std::array<double, kMaxOrder> x_{};
