@@ -660,6 +660,31 @@ TEST(DiagnoseIndependentCases, ALeaderThatStoodInForBothIsExchanged) {
   EXPECT_LT(r.fitted.rmse_validation_um, 1.3 * r.noise_sigma_um) << o.summary;
 }
 
+TEST(DiagnoseIndependentCases, ASecondStateTimeScaleTakesNoRunnerUpsPlace) {
+  // A mixture of the independent generator (tests/data/state_time_scales_placeless/README.md): a 1.3 ms delay
+  // and a 2705 V/s slew limit. Bias-dependent dynamics leads alone, asymmetric dynamics fifth; taking a
+  // runner-up's place beside it, the asymmetry kept the slew limit out of the pairs and the answer was delay
+  // + a mode.
+  const auto o = diagnose_data("state_time_scales_placeless", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  const auto& tried = r.second_effect_test.tried;
+  const auto was_tried = [&](const std::vector<std::string>& pair) {
+    return std::any_of(tried.begin(), tried.end(), [&](const PairTried& t) { return t.effects == pair; });
+  };
+  EXPECT_TRUE(was_tried({"bias_dependent_dynamics", "slew_limit"})) << o.summary;
+  EXPECT_TRUE(was_tried({"bias_dependent_dynamics", "asymmetric_dynamics"})) << o.summary;
+  ASSERT_EQ(r.mixture.size(), 2U) << o.summary;
+  const auto named = [&](EffectKind k) {
+    return std::find_if(r.mixture.begin(), r.mixture.end(), [&](const Effect& e) { return e.kind == k; });
+  };
+  const auto delay = named(EffectKind::delay), slew = named(EffectKind::slew_limit);
+  ASSERT_NE(delay, r.mixture.end()) << o.summary;
+  ASSERT_NE(slew, r.mixture.end()) << o.summary;
+  EXPECT_NEAR(delay->p[0], 1.3e-3, 0.2 * 1.3e-3) << "extra_delay_s: the label's\n" << o.summary;
+  EXPECT_NEAR(slew->p[0], 2705.0, 0.1 * 2705.0) << "slew_rate_V_per_s: the label's\n" << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, BiasDependentDynamicsAboutTheRecordedRangeAreCentredThere) {
   // A case of the independent generator (tests/data/bias_about_a_centre/README.md): the slow pole moves with
   // the displacement, recorded between about 75 and 125 um. Centred at zero, the form needed G's time
