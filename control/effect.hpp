@@ -390,7 +390,7 @@ class AugmentedPlant final {
   /// Slew limit, dead zone and hysteresis on the delayed command (this order: amplifier, then gel).
   double input_stage(double x_V) noexcept;
   // Construction's stages (configuration time: they throw ConfigError).
-  /// Validates the effects and records which run, with their parameters and the time-scaling one.
+  /// Validates the effects and records which run, with their parameters.
   void take_effects(std::span<const Effect> effects);
   /// [A | B], C, D and E per grid entry (the time scales of asymmetric dynamics' direction times those of
   /// bias-dependent dynamics), and the rest state's factorisation at time scale 1. Each effect scales what it
