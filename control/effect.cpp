@@ -518,7 +518,6 @@ void AugmentedPlant::discretise_grid(const StateSpace& ss, bool direction_slow, 
   const auto rows = direction_scales(has(EffectKind::asymmetric_dynamics), p(EffectKind::asymmetric_dynamics));
   const auto columns = bias_scales(has(EffectKind::bias_dependent_dynamics));
   grid_columns_ = columns.size();
-  relaxing_row_ = rows.size() > 1;
   // Time scale 1 for the rest state (asymmetric dynamics' rising row: scaling keeps the DC gain).
   const size_t unit = columns.size() > 1 ? kGridUnitIndex : 0;
   for (size_t g = 0; g < rows.size() * columns.size(); ++g) {
@@ -640,7 +639,7 @@ void AugmentedPlant::apply(double u) noexcept { advance(u); }
   const double w = nonlinearity(x), dw = w_previous_ - w;
   w_previous_ = w;
   // Relaxing: above where the whole block settles (with creep's slow gain, past G(0) w is still rising).
-  const size_t row = relaxing_row_ && block_dc_gain_ * w < y_lin_ ? grid_columns_ : 0;
+  const size_t row = has(EffectKind::asymmetric_dynamics) && block_dc_gain_ * w < y_lin_ ? grid_columns_ : 0;
   if (grid_columns_ == 1) {
     y_lin_ = (this->*linear_step_)(row, 1.0, w, dw);
   } else {
@@ -649,7 +648,7 @@ void AugmentedPlant::apply(double u) noexcept { advance(u); }
     const double pos = std::clamp(static_cast<double>(kGridUnitIndex) + table_log2(bias_time_scale()) * kGridStepsPerOctave, 0.0, kLastInterval);
     y_lin_ = (this->*linear_step_)(row + static_cast<size_t>(pos), 1.0 - (pos - std::floor(pos)), w, dw);
   }
-  if (grid_columns_ > 1) {  // only bias-dependent dynamics' time scale reads them
+  if (has(EffectKind::bias_dependent_dynamics)) {  // only its time scale reads them
     swing_ += op_gain_ * (std::abs(y_lin_ - y_op_) - swing_);
     y_op_ += op_gain_ * (y_lin_ - y_op_);
   }

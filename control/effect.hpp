@@ -422,7 +422,6 @@ class AugmentedPlant final {
   /// The grid: a row per direction (asymmetric dynamics: rising, then relaxing; else one), each of grid_columns_
   /// bias time scales (bias-dependent dynamics: 41; else one). Entry row * grid_columns_ + column.
   size_t grid_columns_ = 1;
-  bool relaxing_row_ = false;  ///< asymmetric dynamics: a second row, G while relaxing
   std::array<double, kMaxOrder> C_{};
   double D_ = 0.0;
   std::array<double, kMaxOrder> x_{};

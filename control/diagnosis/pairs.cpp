@@ -47,6 +47,11 @@ bool both_state_time_scales(const Effect& a, const Effect& b) {
   return state_time_scale(a) && state_time_scale(b);
 }
 
+/// The fitted loop's start branch (its own fit's choice, choose_loop_memory) in `problem`, if a loop was fitted.
+void use_fitted_loop_memory(const DiagnosisResult& res, Problem& problem) {
+  if (const auto* loop = fitted_candidate(res, EffectKind::hysteresis)) problem.set_loop_memory(loop->loop_memory);
+}
+
 /// A second effect's start: its grid point, and the nominal refit it scored best with.
 struct SecondStart {
   Effect effect;
@@ -307,7 +312,7 @@ void exchange_leader(PairFit& best, DiagnosisResult& res, Problem& problem, cons
     if (r.effect.kind != second.kind && can_run_together(r.effect, second)) in_place.push_back(&r);
   }
   if (in_place.empty()) return;
-  if (const auto* loop = fitted_candidate(res, EffectKind::hysteresis)) problem.set_loop_memory(loop->loop_memory);
+  use_fitted_loop_memory(res, problem);
   std::vector<FitSpace> spaces;
   for (const auto* r : in_place) spaces.push_back(pair_space(r->effect, second, data, scale, o));
   std::vector<std::pair<double, Eigen::VectorXd>> fits(spaces.size());
@@ -372,7 +377,7 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
     auto* own = fitted_candidate(res, c.effect.kind);
     if (c.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(c);
   }
-  if (const auto* loop = fitted_candidate(res, EffectKind::hysteresis)) problem.set_loop_memory(loop->loop_memory);
+  use_fitted_loop_memory(res, problem);
   rank_candidates(res, o);
 }
 
