@@ -276,7 +276,7 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   c.poly_next = k.next;
   c.loop_memory = best[v].loop_memory;
   c.fitted = true;
-  if (c.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c.loop_memory);
+  problem.use_loop_memory_of(c);
   const std::vector<Effect> e{c.effect};
   const auto pred = problem.predict(e, nominal_of(c), true);
   if (wanders(e)) c.effect.p[kDriftWander] = std::max(pred.wander_um_per_sqrt_s, 1e-12);
@@ -432,8 +432,7 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   fit_each(warm.candidates ? warm.stage : "candidate fits", res.candidates, order, starts, res.held_out, problem, data,
            scale, o);
   // What the loop's fit chose stays for the fits that follow (pairs with the loop).
-  for (size_t i : order)
-    if (res.candidates[i].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(res.candidates[i].loop_memory);
+  for (size_t i : order) problem.use_loop_memory_of(res.candidates[i]);
   rank_candidates(res, o);
 }
 

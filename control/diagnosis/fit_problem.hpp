@@ -169,6 +169,10 @@ class Problem {
   /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
   /// hysteresis see it. Empty: virgin.
   void set_loop_memory(std::vector<double> m) { loop_memory_ = std::move(m); }
+  /// A loop candidate's start branches (its own fit's choice); a candidate of another kind leaves them.
+  void use_loop_memory_of(const CandidateResult& c) {
+    if (c.effect.kind == EffectKind::hysteresis) loop_memory_ = c.loop_memory;
+  }
   [[nodiscard]] const std::vector<double>& loop_memory() const { return loop_memory_; }
   [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
 

@@ -115,7 +115,7 @@ void add_mode_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res, Pro
   const auto& a = res.candidates.front();
   const Effect mode{EffectKind::resonance, {}};
   if (!can_run_together(a.effect, mode)) return;
-  if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
+  problem.use_loop_memory_of(a);
   const std::vector<Effect> lead{a.effect};
   const Nominal k = nominal_of(a);
   const auto y = problem.predict(lead, k, true).y;
@@ -149,7 +149,7 @@ void add_unscaled_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res,
   Nominal unscaled = nominal_of(a);
   if (std::abs(unscaled.time_scale - 1.0) <= kTimeScaleMoved) return;
   unscaled.time_scale = 1.0;
-  if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
+  problem.use_loop_memory_of(a);
   const auto ranked = grid_beside(a, time_scale_kinds(), unscaled, problem, data, scale, o);
   if (ranked.empty()) return;
   const SecondStart& start = ranked.front().second;
@@ -183,7 +183,7 @@ void add_static_curve_plans(std::vector<PairPlan>& plans, const DiagnosisResult&
                             const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
   if (!f_stopped_at_tolerance(res, o)) return;
   const auto& a = res.candidates.front();
-  if (a.effect.kind == EffectKind::hysteresis) problem.set_loop_memory(a.loop_memory);
+  problem.use_loop_memory_of(a);
   for (EffectKind kind : {EffectKind::dead_zone, EffectKind::saturation}) {
     if (kind == a.effect.kind) continue;
     if (std::any_of(plans.begin(), plans.end(), [&](const PairPlan& p) { return p.second.kind == kind; })) continue;
@@ -418,7 +418,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
     if (!c)
       return problem.predict({}, nominal_of(res.nominal_refit), true).y;
     const std::vector<Effect> e{c->effect};
-    if (c->effect.kind == EffectKind::hysteresis) problem.set_loop_memory(c->loop_memory);
+    problem.use_loop_memory_of(*c);
     return problem.predict(e, nominal_of(*c), true).y;
   };
   const auto* a0 = fitted_candidate(res, pair.effects[0].kind);
@@ -461,7 +461,7 @@ bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair,
   DiagnosisOptions wide = widened_tolerances(o);
   wide.time_scale_tolerance = std::max(o.time_scale_tolerance, 1.0);
   std::vector<CandidateResult> leader{res.candidates.front()};
-  if (leader[0].effect.kind == EffectKind::hysteresis) problem.set_loop_memory(leader[0].loop_memory);
+  problem.use_loop_memory_of(leader[0]);
   const Starts starts{{start_at(leader[0].effect, Nominal{leader[0].time_scale}, scale, wide, data)}};
   fit_each("leader with a wider nominal refit", leader, {0}, starts, res.held_out, problem, data, scale, wide);
   return !Excess(res).ties(pair.errors, leader[0].errors, o);
