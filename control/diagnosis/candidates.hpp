@@ -158,7 +158,7 @@ struct WarmStarts {
   size_t regridded = 0;
 };
 
-/// The leading candidates of the ordinary run that its second, wider run (step 3 of the README) also starts
+/// The leading candidates of the ordinary run that its second, wider run (step 3 of docs/diagnose.md) also starts
 /// from the coarse grid. The ordinary run's fit alone is one start, and a wider f opens minima it does not
 /// lead to: evaluation case215 (creep + drift) lost its creep so, the creep fit from it stuck at fraction
 /// 0.058, 0.9 s, 2.75 decades (the pair then not material) against 0.020, 18.5 s from the grid. The others
