@@ -198,6 +198,22 @@ class ReportPlots {
     gp_ << "unset multiplot\n";
   }
 
+  /// Each fitted candidate's held-out excess left (the verdict's yardstick, excess_share_left) as a bar, best
+  /// at the top, the mixture's members in red, and the augmented model's when it holds two effects; the dashed
+  /// line is the bar a verdict must reach. Reads candidates.dat (write_candidate_data).
+  void candidates(size_t bars, double bar_share) {
+    if (bars == 0) return;
+    const std::string dat = "'" + (dir_ / "candidates.dat").string() + "'";
+    gp_ << "set output '" << (dir_ / "candidates.png").string() << "'\nset terminal pngcairo noenhanced size 900,"
+        << 120 + 36 * bars << " font ',10'\nset title 'Candidates: the held-out excess MSE each leaves'\n"
+        << "unset key\nset xlabel 'share of the nuisance-only refit''s excess left (0: at the noise; dashed: the bar a "
+        << "verdict must reach)'\nset ylabel ''\nset yrange [-0.7:" << static_cast<double>(bars) - 0.3 << "]\nset xrange [*:*]\nset xzeroaxis\n"
+        << "set arrow 1 from " << bar_share << ", graph 0 to " << bar_share << ", graph 1 nohead dt 2 lc rgb 'black'\n"
+        << "set style fill solid 0.8 noborder\nplot " << dat
+        << " u ($3/2):1:($3/2):(0.35):($4==1?0xd62728:0x1f77b4):ytic(2) w boxxyerror lc rgb variable, " << dat
+        << " u 3:1:(sprintf(' %.2f', $3)) w labels left\nunset arrow 1\n";
+  }
+
   [[nodiscard]] std::string script() const { return gp_.str(); }
 
  private:
@@ -239,15 +255,44 @@ std::string report_markdown(const DiagnosisResult& r, const std::vector<std::str
     md << "\n";
   }
   md << "![measured vs simulated](measured_vs_simulated.png)\n\n![residual](residual.png)\n\n"
-     << "![residual vs regime](residual_vs_regime.png)\n\n## Candidates (best first)\n\n";
-  md << "| effect | parameters | evidence R2 | fit RMSE (um) | held-out RMSE (um) |\n|---|---|---|---|---|\n";
+     << "![residual vs regime](residual_vs_regime.png)\n\n## Candidates (best first)\n\n"
+     << "\"Excess left\" is the share of the nuisance-only refit's above-noise held-out MSE that the candidate still "
+     << "leaves (0: to the noise); a verdict must leave at most " << DiagnosisOptions{}.explained_excess << ".\n\n"
+     << "![candidates](candidates.png)\n\n";
+  md << "| effect | parameters | evidence R2 | fit RMSE (um) | held-out RMSE (um) | excess left |\n|---|---|---|---|---|---|\n";
   for (const auto& c : r.candidates) {
     md << "| " << to_string(c.effect.kind) << " | " << parameters_text(c.in_recorded_units(), c.specs) << " | " << number_or_null(c.evidence_r2, "%.3f") << " | "
        << (c.fitted ? number_or_null(c.errors.rmse_fit_um, "%.4f") : "-") << " | " << (c.fitted ? number_or_null(c.errors.rmse_validation_um, "%.4f") : "-")
-       << " |\n";
+       << " | " << (c.fitted ? number_or_null(excess_share_left(r, c.errors), "%.3f") : "-") << " |\n";
   }
   md << "\n## Before and after on held-out data\n\n![validation](validation.png)\n\n```\n" << summary << "```\n";
   return md.str();
+}
+
+/// candidates.dat, what ReportPlots::candidates reads: row, name, excess share left (clipped to -0.5..1.5 so a
+/// candidate far off does not squeeze the rest), 1 when it is in the mixture; the augmented model first when it
+/// holds two effects, then the fitted candidates best first. Returns the number of rows.
+size_t write_candidate_data(const fs::path& dir, const DiagnosisResult& r) {
+  struct Bar {
+    std::string name;
+    double share;
+    bool in_mixture;
+  };
+  std::vector<Bar> bars;
+  if (r.mixture.size() > 1) bars.push_back({"augmented model (mixture)", excess_share_left(r, r.fitted), true});
+  for (const auto& c : r.candidates) {
+    if (!c.fitted || !std::isfinite(excess_share_left(r, c.errors))) continue;
+    const bool member = std::any_of(r.mixture.begin(), r.mixture.end(), [&](const Effect& e) { return e.kind == c.effect.kind; });
+    bars.push_back({std::string(to_string(c.effect.kind)), excess_share_left(r, c.errors), member});
+  }
+  if (bars.empty() || !std::isfinite(bars.front().share)) return 0;
+  std::ostringstream d;
+  d << "# row name excess_share_left in_mixture\n";
+  for (size_t i = 0; i < bars.size(); ++i)
+    d << bars.size() - 1 - i << " \"" << bars[i].name << "\" " << std::clamp(bars[i].share, -0.5, 1.5) << ' '
+      << (bars[i].in_mixture ? 1 : 0) << '\n';
+  write_text_file(dir / "candidates.dat", d.str());
+  return bars.size();
 }
 
 void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vector<Series>& data,
@@ -259,6 +304,7 @@ void write_report(const fs::path& dir, const DiagnosisResult& r, const std::vect
   plots.residual();
   plots.residual_vs_regime();
   plots.validation();
+  plots.candidates(write_candidate_data(dir, r), DiagnosisOptions{}.explained_excess);
   write_text_file(dir / "diagnose.gp", plots.script());
   run_gnuplot(dir / "diagnose.gp");
   write_text_file(dir / "report.md", report_markdown(r, names, summary, model_path));
@@ -520,7 +566,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
     j << (first ? "\n" : ",\n") << "    {\"name\": " << quoted(std::string(to_string(c.effect.kind)))
       << ", \"params\": " << effect_params_json(c) << loop_start_json(c) << ", \"explanation\": " << quoted(c.explanation)
       << ", \"rmse_fit_um\": " << number_or_null(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << number_or_null(c.errors.rmse_validation_um)
-      << ", \"evidence\": {\"coarse_grid_r2\": " << number_or_null(c.evidence_r2) << ", \"validation_rmse_reduction\": " << number_or_null(improvement)
+      << ", \"excess_share_left\": " << number_or_null(excess_share_left(r, c.errors)) << ", \"evidence\": {\"coarse_grid_r2\": " << number_or_null(c.evidence_r2) << ", \"validation_rmse_reduction\": " << number_or_null(improvement)
       << ", \"rmse_all_um\": " << number_or_null(c.errors.rmse_um) << ", \"penalised_score\": " << number_or_null(c.score)
       << ", \"parameters\": " << c.specs.size() << "}}";
     first = false;

@@ -195,12 +195,25 @@ TEST(DiagnoseCommand, ReportHasMarkdownAndPlots) {
   a.model = (dir / "model.toml").string();
   a.recordings = {(dir / "rec.csv").string()};
   a.report = (dir / "report").string();
+  a.json = (dir / "report.json").string();
   a.quiet = true;
   const auto o = run_diagnose(a);
   for (const char* f : {"report.md", "measured_vs_simulated.png", "residual.png", "residual_vs_regime.png", "validation.png",
-                        "augmented_model.toml"})
+                        "candidates.png", "augmented_model.toml"})
     EXPECT_TRUE(fs::exists(dir / "report" / f)) << f;
-  EXPECT_NE(read(dir / "report" / "report.md").find("**Verdict: " + o.result.verdict + "**"), std::string::npos);
+  const auto md = read(dir / "report" / "report.md");
+  EXPECT_NE(md.find("**Verdict: " + o.result.verdict + "**"), std::string::npos);
+  // The candidates' yardstick, shown as the verdict judged it: the leader (drift, named) leaves at most the bar.
+  ASSERT_EQ(o.result.verdict, "drift") << o.summary;
+  const auto& leader = o.result.candidates.front();
+  const double left = excess_share_left(o.result, leader.errors);
+  EXPECT_LE(left, DiagnosisOptions{}.explained_excess);
+  EXPECT_NE(md.find(" | " + format("%.3f", left) + " |\n"), std::string::npos) << md;
+  EXPECT_NE(md.find("![candidates](candidates.png)"), std::string::npos);
+  EXPECT_NE(read(dir / "report.json").find("\"excess_share_left\": " + format("%.6g", left)), std::string::npos);
+  // One bar per fitted candidate, the leader's (in the mixture) marked.
+  const auto bars = read(dir / "report" / "candidates.dat");
+  EXPECT_NE(bars.find("\"drift\" " + format("%g", left) + " 1"), std::string::npos) << bars;
 }
 
 std::string error_of(const std::string& model_text, const std::string& recording_text) {
