@@ -84,9 +84,9 @@ struct DiagnosisOptions {
   double significance_block_s = 0.5;  ///< held-out comparisons average squared errors over blocks this long (the pair test: at most, see pair_block_s)
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
-  double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per parameter of the effect's specs: the
-                                        ///< fixed ones (a form flag, a scale reference, a drift's held offset) count
-                                        ///< too, as the runs measured it (docs/diagnose-evaluation-log.md, 2026-11-30)
+  double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per parameter of the effect's specs, less
+                                        ///< unused_parameters (form flags, a drift's unused wander); a scale reference
+                                        ///< and a drift's held offset still count (docs/diagnose-evaluation-log.md)
   double tie_fit_gain = 0.25;         ///< of two candidates the held-out data cannot separate (ambiguity_margin), the
                                       ///< runner-up leads when its fit-segment excess MSE is this share lower
   double ambiguity_fit_gain = 0.5;    ///< a candidate that explains the held-out data as well as the verdict is

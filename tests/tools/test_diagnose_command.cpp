@@ -582,15 +582,20 @@ TEST(DiagnoseIndependentCases, AWidenedNuisanceRefitStartsFromTheOrdinaryOneToo)
   EXPECT_LT(r.nominal_refit.errors.rmse_um, 1.1 * r.noise_sigma_um) << o.summary;
 }
 
+/// Whether the verdict is `kind` and the augmented model's mixture is led by it (the summary on failure).
+::testing::AssertionResult led_by(const DiagnoseOutcome& o, EffectKind kind) {
+  const auto& r = o.result;
+  if (r.verdict == to_string(kind) && !r.mixture.empty() && r.mixture[0].kind == kind) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << "expected " << to_string(kind) << " to lead\n" << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop) {
   // A case of the independent generator (tests/data/asymmetric_slow_pole/README.md): the slow mode alone
   // relaxes 8% slower than it contracts, tracked in closed loop. Scaling all of G's time constants by
   // direction cannot take it; bias-dependent dynamics on the slow pole alone took it before this form existed.
   const auto o = diagnose_data("asymmetric_slow_pole", "model.toml", {"rec0.csv", "rec1.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "asymmetric_dynamics") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::asymmetric_dynamics) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::asymmetric_dynamics));
   EXPECT_EQ(r.mixture[0].p[1], 1.0) << "slow_pole_only\n" << o.summary;
   EXPECT_GT(r.mixture[0].p[0], 0.0) << "relaxation_slowdown: the relaxation is the slower\n" << o.summary;
 }
@@ -601,12 +606,21 @@ TEST(DiagnoseIndependentCases, AsymmetricDynamicsWithTheRiseAloneOffTheNominal) 
   // beyond the refit's tolerance on G's time scale, and the verdict was `unexplained`.
   const auto o = diagnose_data("asymmetric_rise_off_nominal", "model.toml", {"rec0.csv", "rec1.csv", "rec2.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "asymmetric_dynamics") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  ASSERT_EQ(r.mixture[0].kind, EffectKind::asymmetric_dynamics) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::asymmetric_dynamics));
   EXPECT_NEAR(r.mixture[0].p[0], 0.537 - 1.0, 0.05) << "relaxation_slowdown: the label's ratio of speeds\n" << o.summary;
   EXPECT_GT(r.mixture[0].p[2], 0.5) << "rise_share: the nominal nearer the relaxation's speed\n" << o.summary;
   EXPECT_LT(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
+}
+
+TEST(DiagnoseIndependentCases, ASaturationOnTheDriveIsNotPenalisedForItsFormChoice) {
+  // A case of the independent generator (tests/data/saturation_on_the_drive/README.md): a saturation and a
+  // dead zone both reach the noise, the saturation a little closer on both segments. Its placement flag
+  // (on_drive), a choice between two fitted forms, was counted as a parameter, and the dead zone won.
+  const auto o = diagnose_data("saturation_on_the_drive", "model.toml", {"rec0.csv", "rec1.csv"});
+  const auto& r = o.result;
+  ASSERT_TRUE(led_by(o, EffectKind::saturation));
+  EXPECT_EQ(r.mixture[0].p[*form_flag_index(EffectKind::saturation)], 1.0) << "on the drive, as labelled\n" << o.summary;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.05 * r.noise_sigma_um) << o.summary;
 }
 
 TEST(DiagnoseIndependentCases, ANoneWhoseNuisanceRefitACandidateImprovedIsNone) {
