@@ -281,9 +281,10 @@ size_t write_candidate_data(const fs::path& dir, const DiagnosisResult& r) {
   std::vector<Bar> bars;
   if (r.mixture.size() > 1) bars.push_back({"augmented model (mixture)", excess_share_left(r, r.fitted), true});
   for (const auto& c : r.candidates) {
-    if (!c.fitted || !std::isfinite(excess_share_left(r, c.errors))) continue;
+    const double share = c.fitted ? excess_share_left(r, c.errors) : NAN;
+    if (!std::isfinite(share)) continue;
     const bool member = std::any_of(r.mixture.begin(), r.mixture.end(), [&](const Effect& e) { return e.kind == c.effect.kind; });
-    bars.push_back({std::string(to_string(c.effect.kind)), excess_share_left(r, c.errors), member});
+    bars.push_back({std::string(to_string(c.effect.kind)), share, member});
   }
   if (bars.empty() || !std::isfinite(bars.front().share)) return 0;
   std::ostringstream d;

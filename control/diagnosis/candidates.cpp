@@ -406,7 +406,7 @@ void lead_with_an_explanation(DiagnosisResult& res, const Excess& excess, const 
 void rank_candidates(DiagnosisResult& res, const DiagnosisOptions& o) {
   const Excess excess(res);
   for (auto& c : res.candidates)
-    if (c.fitted) c.score = excess.score(c.errors, c.specs.size() - unused_parameters({&c.effect, 1}), o);
+    if (c.fitted) c.score = excess.score(c.errors, c.specs.size() - unpenalised_parameters({&c.effect, 1}), o);
   // Fitted and observed, then fitted but unobserved, then the rest.
   const auto tier = [](const CandidateResult& c) { return c.nameable() ? 0 : (c.fitted ? 1 : 2); };
   std::stable_sort(res.candidates.begin(), res.candidates.end(), [&](const CandidateResult& a, const CandidateResult& b) {

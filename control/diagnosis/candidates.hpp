@@ -118,7 +118,7 @@ std::optional<size_t> form_choice(EffectKind kind);
 /// choice between two forms each fitted in a space of its own, not a fitted number. Counted, it gave fresh
 /// seed 193's case020 (tests/data/saturation_on_the_drive) and seed 197's case014, a saturation closer to
 /// the noise on both segments, to a dead zone (2 parameters against 3).
-inline size_t unused_parameters(std::span<const Effect> effects) {
+inline size_t unpenalised_parameters(std::span<const Effect> effects) {
   size_t n = 0;
   for (const Effect& e : effects) n += (e.kind == EffectKind::drift && e.p[kDriftWander] == 0.0) + form_flag_index(e.kind).has_value();
   return n;

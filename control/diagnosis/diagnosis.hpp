@@ -85,7 +85,7 @@ struct DiagnosisOptions {
   double window_flag_ratio = 1.3;     ///< window RMS / noise above which a window is a mismatch
   double none_ratio = 1.15;           ///< overall RMS / noise at or below which the model explains the data
   double penalty_per_parameter = 0.02;  ///< relative validation-MSE penalty per parameter of the effect's specs, less
-                                        ///< unused_parameters (form flags, a drift's unused wander); a scale reference
+                                        ///< unpenalised_parameters (form flags, a drift's unused wander); a scale reference
                                         ///< and a drift's held offset still count (docs/diagnose-evaluation-log.md)
   double tie_fit_gain = 0.25;         ///< of two candidates the held-out data cannot separate (ambiguity_margin), the
                                       ///< runner-up leads when its fit-segment excess MSE is this share lower

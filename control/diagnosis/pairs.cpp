@@ -279,7 +279,7 @@ PairFit pair_fit_of(const FitSpace& space, const Eigen::VectorXd& z, DiagnosisRe
   p.gain = pred.gain;
   p.errors = errors_of(data, pred.y, res.held_out);
   p.y = std::move(pred.y);
-  p.score = Excess(res).score(p.errors, space.specs.size() - 1 - unused_parameters(p.effects), o);
+  p.score = Excess(res).score(p.errors, space.specs.size() - 1 - unpenalised_parameters(p.effects), o);
   const auto unobserved = [&](const Effect& e) { return !unobserved_by(e, scale).empty(); };
   if (std::any_of(p.effects.begin(), p.effects.end(), unobserved)) p.score = INFINITY;
   const std::vector<std::string> names{std::string(to_string(p.effects[0].kind)),
