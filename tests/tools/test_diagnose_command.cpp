@@ -299,9 +299,8 @@ TEST(DiagnoseCommand, APiezoLikeModelWithoutATunableControllerIsDiagnosedAndItsT
   EXPECT_NO_THROW((void)control::parse_simulated_rig(toml::parse_file(o.augmented_model_path), o.augmented_model_path));
 }
 
-/// `pvcgel diagnose` on the committed real recordings tests/data/real/NAME/FILES against that directory's
-/// best linear model (linear_model.toml), quietly, the augmented model in a temporary directory.
-/// `pvcgel diagnose` on a committed case: tests/data/CASE/MODEL and its recordings FILES.
+/// `pvcgel diagnose` on a committed case: tests/data/CASE/MODEL and its recordings FILES, quietly, the
+/// augmented model in a temporary directory.
 DiagnoseOutcome diagnose_data(const std::string& name, const std::string& model, const std::vector<std::string>& files) {
   const std::string dir = std::string(PVCGEL_SOURCE_DIR) + "/tests/data/" + name + "/";
   DiagnoseArgs a;
@@ -314,6 +313,8 @@ DiagnoseOutcome diagnose_data(const std::string& name, const std::string& model,
   return run_diagnose(a);
 }
 
+/// `pvcgel diagnose` on the committed real recordings tests/data/real/NAME/FILES against that directory's
+/// best linear model (linear_model.toml).
 DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vector<std::string>& files) {
   return diagnose_data("real/" + name, "linear_model.toml", files);
 }
