@@ -313,6 +313,13 @@ DiagnoseOutcome diagnose_data(const std::string& name, const std::string& model,
   return run_diagnose(a);
 }
 
+/// Whether the verdict is `kind` and the augmented model's mixture is led by it (the summary on failure).
+::testing::AssertionResult led_by(const DiagnoseOutcome& o, EffectKind kind) {
+  const auto& r = o.result;
+  if (r.verdict == to_string(kind) && !r.mixture.empty() && r.mixture[0].kind == kind) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << "expected " << to_string(kind) << " to lead\n" << o.summary;
+}
+
 /// `pvcgel diagnose` on the committed real recordings tests/data/real/NAME/FILES against that directory's
 /// best linear model (linear_model.toml).
 DiagnoseOutcome diagnose_real_recordings(const std::string& name, const std::vector<std::string>& files) {
@@ -343,9 +350,7 @@ TEST(DiagnoseRealRecordings, PiezoSmartHysteresisIsHysteresisAtUnderHalfTheLinea
   // loop's centre: remanence, which a loop explains and a lag cannot, so the verdict is not a forced pick.
   const auto o = diagnose_real_recordings("piezo_smarthysteresis", {"piezo_smarthysteresis.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "hysteresis") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture.front().kind, EffectKind::hysteresis);
+  ASSERT_TRUE(led_by(o, EffectKind::hysteresis));
   EXPECT_TRUE(r.ambiguous_with.empty()) << o.summary;
   // The target: held-out RMSE at most half the best linear model's (measured 0.30 against 0.94 um, the
   // recording held out in three stretches; 0.11 against 0.79 um at ce70c0d with its last 30% held out).
@@ -383,9 +388,7 @@ TEST(DiagnoseRealRecordings, PiezoP885IsHysteresisAtUnderHalfTheLinearModelsErro
   // with free G found (measured 0.258 um held-out against 0.568 um, 0.45x, at this commit's parent).
   const auto o = diagnose_real_recordings("piezo_p885_dbo", {"piezo_p885_dbo_a.csv", "piezo_p885_dbo_b.csv", "piezo_p885_dbo_c.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "hysteresis") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture.front().kind, EffectKind::hysteresis);
+  ASSERT_TRUE(led_by(o, EffectKind::hysteresis));
   EXPECT_TRUE(r.ambiguous_with.empty()) << o.summary;
   EXPECT_EQ(r.alignment.used_samples, 0.0) << r.alignment.note;
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
@@ -421,9 +424,7 @@ TEST(DiagnoseRealRecordings, EmpsFrictionIsADeadZoneNearTheSourcesCoulombFrictio
   // zone alone 0.48x).
   const auto o = diagnose_real_recordings("emps_friction", {"emps_velocity.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "dead_zone") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture.front().kind, EffectKind::dead_zone) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::dead_zone));
   EXPECT_TRUE(r.ambiguous_with.empty()) << o.summary;
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.aligned.rmse_validation_um) << o.summary;
   // The threshold in newtons (gtau = 35.15 N/V) within a factor 1.5 of the source's Coulomb friction.
@@ -581,13 +582,6 @@ TEST(DiagnoseIndependentCases, AWidenedNuisanceRefitStartsFromTheOrdinaryOneToo)
   const auto& r = o.result;
   EXPECT_TRUE(r.nominal_refit.widened()) << o.summary;
   EXPECT_LT(r.nominal_refit.errors.rmse_um, 1.1 * r.noise_sigma_um) << o.summary;
-}
-
-/// Whether the verdict is `kind` and the augmented model's mixture is led by it (the summary on failure).
-::testing::AssertionResult led_by(const DiagnoseOutcome& o, EffectKind kind) {
-  const auto& r = o.result;
-  if (r.verdict == to_string(kind) && !r.mixture.empty() && r.mixture[0].kind == kind) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "expected " << to_string(kind) << " to lead\n" << o.summary;
 }
 
 TEST(DiagnoseIndependentCases, AsymmetricDynamicsOnTheSlowPoleAloneInClosedLoop) {
@@ -780,9 +774,7 @@ TEST(DiagnoseIndependentCases, APairStartThePlantCannotSimulateIsAFailedFitNotAn
   // and the model check threw, so the diagnosis stopped and wrote nothing.
   const auto o = diagnose_data("nan_pair_start", "model.toml", {"rec0.csv", "rec1.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "resonance") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::resonance) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::resonance));
   EXPECT_LE(r.fitted.rmse_validation_um, 0.5 * r.baseline.rmse_validation_um) << o.summary;
   for (const auto& tried : r.second_effect_test.tried)
     EXPECT_FALSE(std::isnan(tried.score)) << tried.effects[0] << "+" << tried.effects[1] << "\n" << o.summary;
@@ -819,9 +811,7 @@ TEST(DiagnoseIndependentCases, ADigitalSlewLimitIsFittedAsOne) {
   // at 1455 V/s on the held command at 100 Hz. The analog form alone left 88% of the excess and a mode led.
   const auto o = diagnose_data("digital_slew_limit", "model.toml", {"rec0.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "slew_limit") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::slew_limit) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::slew_limit));
   EXPECT_EQ(r.mixture[0].p[1], 1.0) << "digital\n" << o.summary;
   EXPECT_NEAR(r.mixture[0].p[0], 1455.0, 0.05 * 1455.0) << "slew_rate_V_per_s\n" << o.summary;
   EXPECT_LE(r.fitted.rmse_validation_um, 1.1 * r.noise_sigma_um) << o.summary;
@@ -832,9 +822,7 @@ TEST(DiagnoseIndependentCases, HalfASampleOfDelayIsADelayAt100Hz) {
   // delay at 100 Hz. With the held command interpolated linearly between samples, a 35 Hz mode led.
   const auto o = diagnose_data("fractional_delay", "model.toml", {"rec0.csv", "rec1.csv", "rec2.csv", "rec3.csv"});
   const auto& r = o.result;
-  EXPECT_EQ(r.verdict, "delay") << o.summary;
-  ASSERT_FALSE(r.mixture.empty()) << o.summary;
-  EXPECT_EQ(r.mixture[0].kind, EffectKind::delay) << o.summary;
+  ASSERT_TRUE(led_by(o, EffectKind::delay));
   EXPECT_NEAR(r.mixture[0].p[0], 0.005, 0.001) << "extra_delay_s: half a sample, beyond the declared one\n" << o.summary;
 }
 
