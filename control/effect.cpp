@@ -65,7 +65,7 @@ Effect with_displacement_scaled(const Effect& e, double factor) {
   Effect out = e;
   const auto specs = parameter_specs(e.kind, DataScale::unbounded(1.0));
   for (size_t i = 0; i < specs.size(); ++i)
-    if (specs[i].name.find("_um") != std::string::npos) out.p[i] *= factor;
+    out.p[i] *= std::pow(factor, specs[i].displacement_power);
   return out;
 }
 
@@ -278,13 +278,13 @@ std::vector<ParameterSpec> saturation_specs(const DataScale& d) {
   // it too), and one just below its far end with a sharp knee, the small stroke limit a nominal
   // identified on the same data leaves. on_drive is 0 or 1, not fitted as a number (fixed: a space
   // holds it at its lower bound, 0); diagnose fits each placement in a space of its own.
-  std::vector<ParameterSpec> specs{{"knee_um", 0.0, 2.0 * reach, false, stroke_knees},
-                                   {"softness_um", 0.05 * reach, 1e4 * reach, true, shares_of(stroke, {0.3, 1.5, 5.0, 20.0})},
+  std::vector<ParameterSpec> specs{in_micrometres({"knee_um", 0.0, 2.0 * reach, false, stroke_knees}),
+                                   in_micrometres({"softness_um", 0.05 * reach, 1e4 * reach, true, shares_of(stroke, {0.3, 1.5, 5.0, 20.0})}),
                                    {"on_drive", 0.0, 1.0, false, {0.0}, 0.0, true}};
   // A stroke with both signs may meet one stop and not the other (a one-sided limit): the knees then
   // lie off-centre. A one-signed stroke meets only its nearer stop, whose height is the knee alone:
   // no centre to fit there (0, the default; a held one would still count in the penalised score).
-  if (bipolar) specs.push_back({"centre_um", -reach, reach, false, shares_of(reach, {0.0, -0.5, 0.5}), 0.0});
+  if (bipolar) specs.push_back(in_micrometres({"centre_um", -reach, reach, false, shares_of(reach, {0.0, -0.5, 0.5}), 0.0}));
   return specs;
 }
 
@@ -308,8 +308,8 @@ std::vector<ParameterSpec> drift_specs(const DataScale& d) {
   // samples (or none) and extrapolated over the held-out data: a 14 s recording's drift fitted there
   // at 1.2 um/s, 28x the held-out error.
   const double onset_max = std::min(dur, 0.9 * d.fit_end_s);
-  return {{"offset_um", -y_abs, y_abs, false, {0.0}},
-          {"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, shares_of(y_abs, {-1e-4, 1e-4})},
+  return {in_micrometres({"offset_um", -y_abs, y_abs, false, {0.0}}),
+          in_micrometres({"rate_um_per_s", -10.0 * y_abs, 10.0 * y_abs, false, shares_of(y_abs, {-1e-4, 1e-4})}),
           {"onset_s", 0.0, onset_max, false, {0.0, std::min(0.25 * dur, onset_max), std::min(0.5 * dur, onset_max)}},
           // Thermal drift settles; a settling time a thousand recordings long is a ramp (0, the
           // default of older files, is exactly one), a fiftieth of one nearly a step.
@@ -317,7 +317,7 @@ std::vector<ParameterSpec> drift_specs(const DataScale& d) {
           // A drift that wanders (a random walk: thermal or sensor) is no function of time a model can
           // carry; its size is. Not fitted as a number (fixed): diagnose fits such a drift as a smooth
           // curve through each recording (a space of its own) and sets this from the curve.
-          {"wander_um_per_sqrt_s", 0.0, 10.0 * y_abs, false, {0.0}, 0.0, true}};
+          in_micrometres({"wander_um_per_sqrt_s", 0.0, 10.0 * y_abs, false, {0.0}, 0.0, true})};
 }
 
 }  // namespace
@@ -372,14 +372,14 @@ std::vector<ParameterSpec> parameter_specs(EffectKind kind, const DataScale& d) 
       // (the low-passed |y - y_op|), not with where it sits: a gel that stiffens under large motion.
       return {{"beta", -1.5, 3.0, false, {-0.2, 0.2, 0.6}},
               {"operating_point_time_constant_s", 0.0, 20.0, false, {0.0, 0.5, 3.0}},
-              {"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true},
+              in_micrometres({"reference_um", y_abs, y_abs, true, {y_abs}, 0.0, true}),
               {"amplitude_beta", -0.7, 3.0, false, {0.0, -0.3, 0.6}, 0.0},
               // 0 or 1, a choice like the saturation's placement: diagnose fits each in a space of its own.
               {"slow_pole_only", 0.0, 1.0, false, {0.0}, 0.0, true},
               // Where G is the nominal's: at zero, or in the middle of the displacement the nominal model runs
               // through (a model identified about the recordings' operating point; beyond the G refit's
               // +-25%, seed 149's case030 needed G 1.6x as slow at zero to fit).
-              {"centre_um", -y_abs, y_abs, false, {0.0, d.y_middle_um()}, 0.0}};
+              in_micrometres({"centre_um", -y_abs, y_abs, false, {0.0, d.y_middle_um()}, 0.0})};
   }
   return {};
 }

@@ -71,7 +71,17 @@ struct ParameterSpec {
   /// Set from the recording's scale (lower == upper), not fitted: a reference that makes the other
   /// parameters dimensionless for any actuator.
   bool fixed = false;
+  /// The unit's power of the displacement unit: 1 for um, um/s, um/sqrt(s), 0 for volts, seconds and
+  /// shares. A plant whose displacement is k times as large has this parameter k^displacement_power times
+  /// as large (with_displacement_scaled).
+  int displacement_power = 0;
 };
+
+/// `spec` in micrometres (displacement_power 1).
+inline ParameterSpec in_micrometres(ParameterSpec spec) {
+  spec.displacement_power = 1;
+  return spec;
+}
 
 /// The longest extra delay the diagnosis fits, in samples of the fastest recording.
 inline constexpr double kFittedDelaySamples = 236.0;
@@ -241,9 +251,10 @@ bool slowest_pole_is_real(const TransferFunction& G);
 /// "name = value, ..." of an effect's parameters (`specs` its parameter_specs), four digits each.
 std::string parameters_text(const Effect& e, const std::vector<ParameterSpec>& specs);
 
-/// The same effect on a plant whose displacement is `factor` times as large (a gain folded into f): its
-/// parameters in displacement units (named *_um*: a saturation's knee, softness and centre, a drift, the
-/// bias-dependent dynamics' reference) scale by `factor`, the others (volts, seconds, shares) stay.
+/// The same effect on a plant whose displacement is `factor` times as large (a gain folded into f): each
+/// parameter scales by factor^displacement_power (its spec's: a saturation's knee, softness and centre, a
+/// drift, the bias-dependent dynamics' reference and centre by `factor`), the others (volts, seconds,
+/// shares) stay.
 Effect with_displacement_scaled(const Effect& e, double factor);
 
 /// Where `kind` keeps the parameter that chooses between its two forms (0 or 1: saturation's on_drive,

@@ -7,6 +7,7 @@
 #include <complex>
 #include <numbers>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -289,6 +290,25 @@ TEST(Effect, ScalingTheDisplacementScalesOnlyTheParametersInMicrometres) {
   // reference_um and centre_um; beta, tau, amplitude_beta and the form stay
   const Effect loop{EffectKind::hysteresis, {0.1, 20.0, 0.5}};
   EXPECT_EQ(with_displacement_scaled(loop, 0.8).p, loop.p);  // volts and shares
+}
+
+// The unit in a parameter's name (what files and JSON say) and the power of micrometres its spec
+// declares (what with_displacement_scaled uses) must agree: "um" before any "per" is a power of 1, after
+// it -1, no "um" 0.
+TEST(Effect, EveryParametersDisplacementPowerMatchesTheUnitInItsName) {
+  int in_micrometres = 0;
+  for (EffectKind kind : kCandidateEffects)
+    for (const auto& spec : parameter_specs(kind, DataScale::unbounded(1e-3))) {
+      int expected = 0, sign = 1;
+      std::istringstream tokens(spec.name);
+      for (std::string token; std::getline(tokens, token, '_');) {
+        if (token == "per") sign = -1;
+        if (token == "um") expected += sign;
+      }
+      EXPECT_EQ(spec.displacement_power, expected) << to_string(kind) << "." << spec.name;
+      in_micrometres += spec.displacement_power != 0;
+    }
+  EXPECT_EQ(in_micrometres, 8);  // saturation 3 (bipolar: with its centre), drift 3, bias-dependent dynamics 2
 }
 
 TEST(DataScale, TheValueNearestZeroIsTheRangesNearEndOrZeroWhenItCrossesZero) {
