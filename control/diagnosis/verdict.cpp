@@ -96,9 +96,9 @@ std::string drift_without_hold_text(const DiagnosisResult& res, const std::vecto
 /// recordings alone is a drift, with rates of -0.037 and -0.093 um/s; together the shared one leaves 53%).
 /// Empty otherwise.
 std::string drift_of_its_own_text(const DiagnosisResult& res, size_t recordings) {
-  if (!res.mixture.empty() || res.verdict != "unexplained" || recordings < 2 || res.candidates.empty()) return "";
+  if (res.verdict != "unexplained" || recordings < 2 || res.candidates.empty()) return "";
   const auto& best = res.candidates.front();
-  if (!best.fitted || best.effect.kind != EffectKind::drift || best.effect.p[kDriftWander] != 0.0) return "";
+  if (!best.fitted || best.effect.kind != EffectKind::drift || wanders({&best.effect, 1})) return "";
   return format(" The drift fitted is one function of the time since each recording's start, shared by the %zu "
                 "recordings (only its offset is each one's own): a drift of each recording's own, as a thermal one "
                 "not timed by the recordings' starts, is not modelled. Diagnose each recording alone to see whether "
