@@ -545,6 +545,15 @@ std::string loop_start_json(const CandidateResult& c) {
   return ", \"loop_start\": [" + names + "], \"loop_start_share\": [" + shares + "]";
 }
 
+/// A fitted slew limit's drive start per recording (", \"drive_start\": [\"at_rest\", \"at_start\", ...]": where
+/// the actuator rests, or at the analysis's start), empty otherwise.
+std::string drive_start_json(const CandidateResult& c) {
+  if (c.drive_at_rest.empty()) return "";
+  std::string names;
+  for (size_t r = 0; r < c.drive_at_rest.size(); ++r) names += (r ? ", " : "") + quoted(c.drive_at_rest[r] ? "at_rest" : "at_start");
+  return ", \"drive_start\": [" + names + "]";
+}
+
 /// How the held-out samples were chosen, one rule for all recordings or one per recording.
 std::string validation_sentence(const DiagnosisResult& r) {
   const auto& rules = r.held_out_rule;
@@ -565,7 +574,7 @@ std::string diagnosis_json(const DiagnosisResult& r, const std::vector<std::stri
     if (!c.fitted) continue;
     const double improvement = r.baseline.rmse_validation_um > 0 ? 1.0 - c.errors.rmse_validation_um / r.baseline.rmse_validation_um : 0.0;
     j << (first ? "\n" : ",\n") << "    {\"name\": " << quoted(std::string(to_string(c.effect.kind)))
-      << ", \"params\": " << effect_params_json(c) << loop_start_json(c) << ", \"explanation\": " << quoted(c.explanation)
+      << ", \"params\": " << effect_params_json(c) << loop_start_json(c) << drive_start_json(c) << ", \"explanation\": " << quoted(c.explanation)
       << ", \"rmse_fit_um\": " << number_or_null(c.errors.rmse_fit_um) << ", \"rmse_validation_um\": " << number_or_null(c.errors.rmse_validation_um)
       << ", \"excess_share_left\": " << number_or_null(excess_share_left(r, c.errors)) << ", \"evidence\": {\"coarse_grid_r2\": " << number_or_null(c.evidence_r2) << ", \"validation_rmse_reduction\": " << number_or_null(improvement)
       << ", \"rmse_all_um\": " << number_or_null(c.errors.rmse_um) << ", \"penalised_score\": " << number_or_null(c.score)

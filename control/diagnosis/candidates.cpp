@@ -174,6 +174,30 @@ bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::Ve
   return memory != before;
 }
 
+/// Where each recording's slew limit drive starts, one recording at a time, by the fit-segment cost at z: at
+/// the analysis's start, or where the actuator rests (Problem::set_drive_at_rest). A closed loop from a
+/// charged start commands at once what the drive reaches only by slewing there (fresh seed 211's case021);
+/// a recording that starts mid-motion finds the drive at its commands (seed 131's case035). Leaves it set in
+/// `problem`; returns whether it changed.
+bool choose_drive_at_rest(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
+  const auto e = space.effects(z);
+  const Nominal k = space.g_scale(z);
+  std::vector<char> at_rest = problem.drive_at_rest();
+  at_rest.resize(recordings, 0);
+  const auto before = at_rest;
+  for (size_t r = 0; r < recordings; ++r) {
+    std::array<double, 2> cost{};
+    for (char choice : {0, 1}) {
+      at_rest[r] = choice;
+      problem.set_drive_at_rest(at_rest);
+      cost[static_cast<size_t>(choice)] = problem.residual(e, k).squaredNorm();
+    }
+    at_rest[r] = cost[1] < cost[0] ? 1 : 0;
+  }
+  problem.set_drive_at_rest(at_rest);
+  return at_rest != before;
+}
+
 }  // namespace
 
 /// The parameter that chooses between forms fitted in spaces of their own (candidate_spaces), if any.
@@ -219,11 +243,13 @@ std::vector<FitSpace> candidate_spaces(EffectKind kind, const DataScale& scale, 
 
 /// One joint fit of a candidate (effect parameters and the nominal refit; gain, offset and initial state by
 /// projection) in one of its spaces from one start: the cost it reaches, where, and for a loop the branch
-/// each recording starts on (chosen before the fit and once more after it).
+/// each recording starts on, for a slew limit where its drive starts (each chosen before the fit and once
+/// more after it).
 struct StartFit {
   double cost = INFINITY;
   Eigen::VectorXd z;
   std::vector<double> loop_memory;
+  std::vector<char> drive_at_rest;
 };
 
 StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& problem, size_t recordings) {
@@ -234,11 +260,17 @@ StartFit fit_from(const FitSpace& space, const Eigen::VectorXd& s0, Problem& pro
   const Nominal k{s0(effect_params), s0(effect_params + 1), s0(effect_params + 2)};
   z.tail(kNominalParams) = space.z_of({space.effects(z).front()}, k).tail(kNominalParams);
   const bool loop = space.kinds.front() == EffectKind::hysteresis;
-  if (loop) choose_loop_memory(problem, space, z, recordings);
+  const bool slew = space.kinds.front() == EffectKind::slew_limit;
+  const auto choose_starts = [&] {
+    return (loop && choose_loop_memory(problem, space, z, recordings)) ||
+           (slew && choose_drive_at_rest(problem, space, z, recordings));
+  };
+  choose_starts();
   z = fit_staged(problem, space, z, out.cost);
-  if (loop && choose_loop_memory(problem, space, z, recordings)) z = fit_staged(problem, space, z, out.cost);
+  if (choose_starts()) z = fit_staged(problem, space, z, out.cost);
   out.z = std::move(z);
   if (loop) out.loop_memory = problem.loop_memory();
+  if (slew) out.drive_at_rest = problem.drive_at_rest();
   return out;
 }
 
@@ -275,8 +307,9 @@ void finish_candidate(CandidateResult& c, const std::vector<FitSpace>& spaces, c
   c.poly_shape = k.shape;
   c.poly_next = k.next;
   c.loop_memory = best[v].loop_memory;
+  c.drive_at_rest = best[v].drive_at_rest;
   c.fitted = true;
-  problem.use_loop_memory_of(c);
+  problem.use_start_states_of(c);
   const std::vector<Effect> e{c.effect};
   const auto pred = problem.predict(e, nominal_of(c), true);
   if (wanders(e)) c.effect.p[kDriftWander] = std::max(pred.wander_um_per_sqrt_s, 1e-12);
@@ -431,8 +464,8 @@ void fit_candidates(DiagnosisResult& res, Problem& problem, const std::vector<Se
   order.resize(std::min(order.size(), static_cast<size_t>(std::max(o.candidates_to_fit, 0))));
   fit_each(warm.candidates ? warm.stage : "candidate fits", res.candidates, order, starts, res.held_out, problem, data,
            scale, o);
-  // What the loop's fit chose stays for the fits that follow (pairs with the loop).
-  for (size_t i : order) problem.use_loop_memory_of(res.candidates[i]);
+  // What the loop's and the slew limit's fits chose stays for the fits that follow (pairs with them).
+  for (size_t i : order) problem.use_start_states_of(res.candidates[i]);
   rank_candidates(res, o);
 }
 

@@ -143,6 +143,9 @@ struct CandidateResult {
   /// between: partway, by a step of that share of the widest play),
   /// a nuisance chosen with the loop's fit; empty for the other candidates.
   std::vector<double> loop_memory;
+  /// A slew limit's drive start per recording (Problem::set_drive_at_rest: 1 where the actuator rests, 0 at
+  /// the analysis's start), a nuisance chosen with the slew limit's fit; empty for the other candidates.
+  std::vector<char> drive_at_rest;
   int simulations = 0;
   std::string explanation;
 };

@@ -193,6 +193,10 @@ bool wanders(std::span<const Effect> e) {
   return std::any_of(e.begin(), e.end(), [](const Effect& x) { return x.kind == EffectKind::drift && x.p[kDriftWander] > 0.0; });
 }
 
+bool slews(std::span<const Effect> e) {
+  return std::any_of(e.begin(), e.end(), [](const Effect& x) { return x.kind == EffectKind::slew_limit; });
+}
+
 size_t Problem::block_length(const std::vector<char>& mask) {
   const auto held = std::find(mask.begin(), mask.end(), 1);
   return std::max<size_t>(static_cast<size_t>(std::find(held, mask.end(), 0) - mask.begin()), 1);

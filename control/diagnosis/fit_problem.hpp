@@ -135,6 +135,9 @@ struct Prediction {
 /// Whether `e` holds a drift that wanders: the projection then also fits a smooth curve per recording.
 bool wanders(std::span<const Effect> e);
 
+/// Whether `e` holds a slew limit: its state is the drive the actuator sees (Problem::set_drive_at_rest).
+bool slews(std::span<const Effect> e);
+
 /// Simulates candidate models and fits the nuisance parameters that enter
 /// linearly by least squares on the fit samples (variable projection): the
 /// overall gain (bounded), a sensor offset per recording and the initial
@@ -169,9 +172,16 @@ class Problem {
   /// The branch each recording's loop starts on (AugmentedPlant::set_loop_memory); only plants with
   /// hysteresis see it. Empty: virgin.
   void set_loop_memory(std::vector<double> m) { loop_memory_ = std::move(m); }
-  /// A loop candidate's start branches (its own fit's choice); a candidate of another kind leaves them.
-  void use_loop_memory_of(const CandidateResult& c) {
+  /// Per recording, whether a slew limit's drive starts where the actuator rests, at the voltage the first
+  /// samples imply, instead of at the analysis's start (a closed loop from a charged start: the first
+  /// command is not where the actuator was left, and the drive slews from there). Empty: nowhere.
+  void set_drive_at_rest(std::vector<char> at_rest) { drive_at_rest_ = std::move(at_rest); }
+  [[nodiscard]] const std::vector<char>& drive_at_rest() const { return drive_at_rest_; }
+  /// A candidate's start states (its own fit's choice): a loop's branches, a slew limit's drive; a candidate
+  /// of another kind leaves them.
+  void use_start_states_of(const CandidateResult& c) {
     if (c.effect.kind == EffectKind::hysteresis) loop_memory_ = c.loop_memory;
+    if (c.effect.kind == EffectKind::slew_limit) drive_at_rest_ = c.drive_at_rest;
   }
   [[nodiscard]] const std::vector<double>& loop_memory() const { return loop_memory_; }
   [[nodiscard]] const std::vector<double>& initial() const { return initial_V_; }
@@ -185,7 +195,8 @@ class Problem {
       const auto& s = data_[r];
       AugmentedPlant plant(mk, io_, s.sample_time_s, e);
       if (r < loop_memory_.size()) plant.set_loop_memory(loop_memory_[r]);
-      const double v0 = std::isnan(initial_V_[r]) ? rest_from_output(plant, s, u_range_[r]) : initial_V_[r];
+      const bool from_output = std::isnan(initial_V_[r]) || (r < drive_at_rest_.size() && drive_at_rest_[r] && slews(e));
+      const double v0 = from_output ? rest_from_output(plant, s, u_range_[r]) : initial_V_[r];
       const size_t n = all ? s.u_V.size() : end_[r];
       out.push_back(plant.simulate(std::span<const double>(s.u_V).first(n), v0));
     }
@@ -266,6 +277,7 @@ class Problem {
   std::vector<size_t> block_;  ///< the held-out block length, per recording (a wandering drift's knot spacing)
   std::vector<double> initial_V_;
   std::vector<double> loop_memory_;
+  std::vector<char> drive_at_rest_;
   double io_ = 1.0;
   std::vector<std::pair<double, double>> u_range_;  ///< per recording, voltage_range
   double u_ref_ = 1e-9;  ///< largest recorded |u| (V)

@@ -47,9 +47,11 @@ bool both_state_time_scales(const Effect& a, const Effect& b) {
   return state_time_scale(a) && state_time_scale(b);
 }
 
-/// The fitted loop's start branch (its own fit's choice, choose_loop_memory) in `problem`, if a loop was fitted.
-void use_fitted_loop_memory(const DiagnosisResult& res, Problem& problem) {
-  if (const auto* loop = fitted_candidate(res, EffectKind::hysteresis)) problem.set_loop_memory(loop->loop_memory);
+/// The fitted loop's start branch and slew limit's drive start (each its own fit's choice) in `problem`, where
+/// fitted.
+void use_fitted_start_states(const DiagnosisResult& res, Problem& problem) {
+  for (EffectKind kind : {EffectKind::hysteresis, EffectKind::slew_limit})
+    if (const auto* c = fitted_candidate(res, kind)) problem.use_start_states_of(*c);
 }
 
 /// A second effect's start: its grid point, and the nominal refit it scored best with.
@@ -115,7 +117,7 @@ void add_mode_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res, Pro
   const auto& a = res.candidates.front();
   const Effect mode{EffectKind::resonance, {}};
   if (!can_run_together(a.effect, mode)) return;
-  problem.use_loop_memory_of(a);
+  problem.use_start_states_of(a);
   const std::vector<Effect> lead{a.effect};
   const Nominal k = nominal_of(a);
   const auto y = problem.predict(lead, k, true).y;
@@ -149,7 +151,7 @@ void add_unscaled_plan(std::vector<PairPlan>& plans, const DiagnosisResult& res,
   Nominal unscaled = nominal_of(a);
   if (std::abs(unscaled.time_scale - 1.0) <= kTimeScaleMoved) return;
   unscaled.time_scale = 1.0;
-  problem.use_loop_memory_of(a);
+  problem.use_start_states_of(a);
   const auto ranked = grid_beside(a, time_scale_kinds(), unscaled, problem, data, scale, o);
   if (ranked.empty()) return;
   const SecondStart& start = ranked.front().second;
@@ -183,7 +185,7 @@ void add_static_curve_plans(std::vector<PairPlan>& plans, const DiagnosisResult&
                             const std::vector<Series>& data, const DataScale& scale, const DiagnosisOptions& o) {
   if (!f_stopped_at_tolerance(res, o)) return;
   const auto& a = res.candidates.front();
-  problem.use_loop_memory_of(a);
+  problem.use_start_states_of(a);
   for (EffectKind kind : {EffectKind::dead_zone, EffectKind::saturation}) {
     if (kind == a.effect.kind) continue;
     if (std::any_of(plans.begin(), plans.end(), [&](const PairPlan& p) { return p.second.kind == kind; })) continue;
@@ -312,7 +314,7 @@ void exchange_leader(PairFit& best, DiagnosisResult& res, Problem& problem, cons
     if (r.effect.kind != second.kind && can_run_together(r.effect, second)) in_place.push_back(&r);
   }
   if (in_place.empty()) return;
-  use_fitted_loop_memory(res, problem);
+  use_fitted_start_states(res, problem);
   std::vector<FitSpace> spaces;
   for (const auto* r : in_place) spaces.push_back(pair_space(r->effect, second, data, scale, o));
   std::vector<std::pair<double, Eigen::VectorXd>> fits(spaces.size());
@@ -377,7 +379,7 @@ void refit_members_alone(DiagnosisResult& res, const PairFit& pair, Problem& pro
     auto* own = fitted_candidate(res, c.effect.kind);
     if (c.errors.rmse_fit_um < own->errors.rmse_fit_um) *own = std::move(c);
   }
-  use_fitted_loop_memory(res, problem);
+  use_fitted_start_states(res, problem);
   rank_candidates(res, o);
 }
 
@@ -418,7 +420,7 @@ bool judge_pair(DiagnosisResult& res, PairFit& pair, Problem& problem, const std
     if (!c)
       return problem.predict({}, nominal_of(res.nominal_refit), true).y;
     const std::vector<Effect> e{c->effect};
-    problem.use_loop_memory_of(*c);
+    problem.use_start_states_of(*c);
     return problem.predict(e, nominal_of(*c), true).y;
   };
   const auto* a0 = fitted_candidate(res, pair.effects[0].kind);
@@ -461,7 +463,7 @@ bool pair_beats_a_wider_nominal(const DiagnosisResult& res, const PairFit& pair,
   DiagnosisOptions wide = widened_tolerances(o);
   wide.time_scale_tolerance = std::max(o.time_scale_tolerance, 1.0);
   std::vector<CandidateResult> leader{res.candidates.front()};
-  problem.use_loop_memory_of(leader[0]);
+  problem.use_start_states_of(leader[0]);
   const Starts starts{{start_at(leader[0].effect, Nominal{leader[0].time_scale}, scale, wide, data)}};
   fit_each("leader with a wider nominal refit", leader, {0}, starts, res.held_out, problem, data, scale, wide);
   return !Excess(res).ties(pair.errors, leader[0].errors, o);

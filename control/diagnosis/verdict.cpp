@@ -125,8 +125,9 @@ void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effec
 }
 
 /// Where a fitted loop starts, when not virgin: "; the loop starts on the rising branch in recording 0,
-/// partway (0.38 of the widest play) to the falling branch in recording 1".
-std::string loop_start_text(const CandidateResult& c) {
+/// partway (0.38 of the widest play) to the falling branch in recording 1"; where a slew limit's drive
+/// starts, when at rest: "; the drive slews from where the actuator rests in recording 0".
+std::string start_states_text(const CandidateResult& c) {
   std::string s;
   for (size_t r = 0; r < c.loop_memory.size(); ++r) {
     const double m = c.loop_memory[r];
@@ -135,6 +136,10 @@ std::string loop_start_text(const CandidateResult& c) {
     s += (s.empty() ? "; the loop starts " : ", ") + where + (m > 0.0 ? "rising" : "falling") + " branch in recording " +
          std::to_string(r);
   }
+  std::string at_rest;
+  for (size_t r = 0; r < c.drive_at_rest.size(); ++r)
+    if (c.drive_at_rest[r]) at_rest += (at_rest.empty() ? "" : ", ") + std::to_string(r);
+  if (!at_rest.empty()) s += "; the drive slews from where the actuator rests in recording " + at_rest;
   return s;
 }
 
@@ -143,7 +148,7 @@ void explain_candidates(DiagnosisResult& res) {
   for (auto& c : res.candidates)
     c.explanation = std::string(physical_meaning(c.effect.kind)) + ". Fitted " + parameters_text(c.in_recorded_units(), c.specs) +
                     (c.fitted ? " (G time scale " + format("%.3g", c.time_scale) + ", gain " + format("%.3g", c.gain) +
-                                    loop_start_text(c) + "); validation RMSE " +
+                                    start_states_text(c) + "); validation RMSE " +
                                     format("%.3g", res.nominal_refit.errors.rmse_validation_um) + " -> " +
                                     format("%.3g", c.errors.rmse_validation_um) + " um"
                               : " (coarse grid only: not among the leading candidates)") +

@@ -820,6 +820,20 @@ TEST(DiagnoseIndependentCases, ALoopThatDoesNoWorkDoesNotBuyAFasterG) {
   EXPECT_NE(read(o.augmented_model_path).find("[controller]\nperiod_s = 0.0001\n"), std::string::npos);
 }
 
+TEST(DiagnoseIndependentCases, ASlewLimitSlewsFromWhereTheActuatorWasLeft) {
+  // A fresh case of the independent generator (tests/data/slew_from_charged_start/README.md): an analog slew
+  // limit at 294 V/s under closed loop from a charged start at 100 Hz. Started at rest at the first command,
+  // the slew candidate bent its rate to the start (243 V/s), did worse than the nuisance-only refit held out,
+  // and a delay led.
+  const auto o = diagnose_data("slew_from_charged_start", "model.toml", {"rec0.csv"});
+  const auto& r = o.result;
+  ASSERT_TRUE(led_by(o, EffectKind::slew_limit));
+  EXPECT_NEAR(r.mixture[0].p[0], 294.0, 0.05 * 294.0) << "slew_rate_V_per_s: the label's\n" << o.summary;
+  EXPECT_NE(r.explanation.find("the drive slews from where the actuator rests in recording 0"), std::string::npos)
+      << r.explanation;
+  EXPECT_LT(r.fitted.rmse_validation_um, 1.05 * r.noise_sigma_um) << o.summary;
+}
+
 TEST(DiagnoseIndependentCases, ADigitalSlewLimitIsFittedAsOne) {
   // A fresh case of the independent generator (tests/data/digital_slew_limit/README.md): a digital limiter
   // at 1455 V/s on the held command at 100 Hz. The analog form alone left 88% of the excess and a mode led.

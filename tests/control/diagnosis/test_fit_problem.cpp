@@ -113,6 +113,37 @@ TEST_F(Projection, ANegativeAddedTermLeavesFIncreasingPastTheControllersRangeWit
   EXPECT_LT(*turn, 1.02 * 845.0);  // the limit, not far inside it
 }
 
+TEST(SlewLimitStart, ADriveAtRestSlewsFromWhereTheActuatorWasNotFromTheFirstCommand) {
+  // A rig left at rest at 480 V whose recording's commands start at 334 V (a closed loop from a charged
+  // start): its 200 V/s amplifier slews down from 480 V for 0.7 s. (The rest the first samples imply is
+  // looked for within 20% of the recorded commands' span beyond them: up to 496 V here.)
+  const HammersteinModel model = paper_model(2);
+  const DiagnosisOptions options;
+  Series s = drive();
+  Effect slew{EffectKind::slew_limit};
+  slew.p[0] = 200.0;  // slew_rate_V_per_s; analog
+  AugmentedPlant rig(model, 0, Ts, std::span<const Effect>(&slew, 1));
+  s.y_um = rig.simulate(s.u_V, 480.0);
+  const std::vector<Series> data{s};
+  const std::vector<std::vector<char>> held_out{held_out_mask(s.u_V.size(), Ts, options)};
+  Problem p(model, data, held_out, options);
+  p.set_delay(0.0);
+  p.set_initial({s.u_V.front()});  // the start the nominal model chose: its G modes absorb the rest
+  const auto worst_error = [&] {
+    const auto pred = p.predict(std::vector<Effect>{slew}, Nominal{}, true);
+    double worst = 0.0;
+    for (size_t k = 0; k < s.y_um.size(); ++k) worst = std::max(worst, std::abs(pred.y[0][k] - s.y_um[k]));
+    return worst;
+  };
+  EXPECT_GT(worst_error(), 5.0);  // the drive slewing from the first command is microns off during the start
+  p.set_drive_at_rest({1});
+  EXPECT_LT(worst_error(), 0.05);  // the first samples' line puts the rest within a fraction of a volt
+  // Only a slew limit's drive moves: the nominal alone starts where the analysis chose.
+  const auto nominal = p.predict({}, Nominal{}, true);
+  p.set_drive_at_rest({});
+  EXPECT_EQ(p.predict({}, Nominal{}, true).y, nominal.y);
+}
+
 TEST(ModelDisplacement, TheSaturationsKneeRangeCoversTheNominalsDisplacementBeforeTheRefitsGain) {
   // A recorded stroke of 75..125 um read by a refit of gain 0.27 and offset 8 um (independent seed 137's
   // case043, a widened refit): the nominal's own displacement, where the knee acts, runs 248..433 um.
