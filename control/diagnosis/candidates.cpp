@@ -187,12 +187,12 @@ bool choose_drive_at_rest(Problem& problem, const FitSpace& space, const Eigen::
   const auto before = at_rest;
   for (size_t r = 0; r < recordings; ++r) {
     std::array<double, 2> cost{};
-    for (char choice : {0, 1}) {
-      at_rest[r] = choice;
+    for (size_t choice : {0U, 1U}) {
+      at_rest[r] = static_cast<char>(choice);
       problem.set_drive_at_rest(at_rest);
-      cost[static_cast<size_t>(choice)] = problem.residual(e, k).squaredNorm();
+      cost[choice] = problem.residual(e, k).squaredNorm();
     }
-    at_rest[r] = cost[1] < cost[0] ? 1 : 0;
+    at_rest[r] = static_cast<char>(cost[1] < cost[0]);
   }
   problem.set_drive_at_rest(at_rest);
   return at_rest != before;

@@ -105,6 +105,22 @@ std::string drift_of_its_own_text(const DiagnosisResult& res, size_t recordings)
                 "each is a drift on its own.", recordings);
 }
 
+/// What an `unexplained` verdict whose nuisance-only refit itself comes within 10% of the noise variance
+/// means: the nominal model's own parameters account for its residual, and what is left is too small for any
+/// effect to beat that refit (fresh seed 211's case038: dynamics that depend on the bias, over one closed-loop
+/// recording about one operating point, where they are G's time constants scaled once; the refit leaves
+/// 0.0507 um against 0.0501 um of noise, and one window fails the `none` test). Empty otherwise.
+std::string refit_at_noise_text(const DiagnosisResult& res) {
+  const double refit_um = res.nominal_refit.errors.rmse_um, sigma_um = res.noise_sigma_um;
+  if (res.verdict != "unexplained" || !(refit_um * refit_um <= 1.1 * sigma_um * sigma_um)) return "";
+  const auto& k = res.nominal_refit;
+  return format(" The nuisance-only refit alone comes within 10%% of the noise variance (gain %.3g, G's time scale "
+                "%.3g, f's shape %.3g): the nominal model's own parameters account for its residual, and what is left "
+                "is too small for an effect to beat that refit. Re-identify the nominal model (pvcgel ident) on these "
+                "recordings; over one operating point, dynamics that depend on it look like a time scale, so record "
+                "at a second one to tell them apart.", k.gain, k.time_scale, k.poly_shape);
+}
+
 /// The verdict's fields from the chosen effects, and the nominal refit and offset as fitted jointly with
 /// them (what the augmented model runs).
 void set_verdict(DiagnosisResult& res, Problem& problem, const std::vector<Effect>& chosen, Nominal k,
@@ -307,7 +323,7 @@ void decide(DiagnosisResult& res, Problem& problem, const std::vector<Series>& d
   }
   explain_candidates(res);
   res.explanation = explain_verdict(res, excess, pair_ok) + drift_without_hold_text(res, data) +
-                    drift_of_its_own_text(res, data.size());
+                    drift_of_its_own_text(res, data.size()) + refit_at_noise_text(res);
 }
 
 /// `none` when the nuisance-only refit passes the `none` test (passes_none_test) and no longer delay than the
