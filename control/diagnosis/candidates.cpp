@@ -136,66 +136,67 @@ Starts regridded_warm_starts(DiagnosisResult& res, Problem& problem, const WarmS
   return starts;
 }
 
-/// The branch each recording's loop starts on, one recording at a time, by the fit-segment cost at z:
+/// Per recording, one at a time with the others held, the start state of the lowest fit-segment cost at z
+/// among those `search(try_start, chosen)` prices (try_start(v) prices v, chosen() is the cheapest so far,
+/// the first of equals); `state` the current states (empty: T{} each), `set` puts states in the problem.
+/// Leaves the choice set; returns whether it changed.
+template <class T, class Set, class Search>
+bool choose_start_states(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, std::vector<T> state,
+                         size_t recordings, Set set, Search search) {
+  const auto e = space.effects(z);
+  const Nominal k = space.g_scale(z);
+  state.resize(recordings, T{});
+  const auto before = state;
+  for (size_t r = 0; r < recordings; ++r) {
+    double best = INFINITY;
+    T chosen = state[r];
+    const auto try_start = [&](T v) {
+      state[r] = v;
+      set(state);
+      const double cost = problem.residual(e, k).squaredNorm();
+      if (cost < best) best = cost, chosen = v;
+    };
+    search(try_start, [&] { return chosen; });
+    state[r] = chosen;
+  }
+  set(state);
+  return state != before;
+}
+
+/// The branch each recording's loop starts on, by choose_start_states:
 /// virgin, rising or falling, then partway along the better side (set_loop_memory: a single step from a
 /// hold at another level, the start of a recording made after such a hold), to an eighth of the widest play.
 /// A recording that starts after a hold elsewhere or mid-motion starts part of a loop away from virgin, an
-/// offset as large as the loop that no effect parameter can take. Leaves it set in `problem`; returns
-/// whether it changed.
+/// offset as large as the loop that no effect parameter can take.
 bool choose_loop_memory(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
-  const auto e = space.effects(z);
-  const Nominal k = space.g_scale(z);
-  std::vector<double> memory = problem.loop_memory();
-  memory.resize(recordings, 0.0);
-  const auto before = memory;
-  for (size_t r = 0; r < recordings; ++r) {
-    double best = INFINITY, chosen = memory[r];
-    const auto try_start = [&](double share) {
-      memory[r] = share;
-      problem.set_loop_memory(memory);
-      const double cost = problem.residual(e, k).squaredNorm();
-      if (cost < best) best = cost, chosen = share;
-    };
+  const auto set = [&](const std::vector<double>& m) { problem.set_loop_memory(m); };
+  return choose_start_states(problem, space, z, problem.loop_memory(), recordings, set,
+                             [](const auto& try_start, const auto& chosen) {
     for (double branch : {0.0, 1.0, -1.0}) try_start(branch);
     // Partway: along the better branch's side (from virgin, a quarter of the way to either), then an eighth
     // either side of the best.
-    if (const double side = chosen; side == 0.0) {
+    if (const double side = chosen(); side == 0.0) {
       try_start(0.25);
       try_start(-0.25);
     } else {
       for (double share : {0.25, 0.5, 0.75}) try_start(std::copysign(share, side));
     }
-    const double centre = chosen;
+    const double centre = chosen();
     for (double d : {-0.125, 0.125})
       if (std::abs(centre + d) < 1.0 && centre + d != 0.0) try_start(centre + d);
-    memory[r] = chosen;
-  }
-  problem.set_loop_memory(memory);
-  return memory != before;
+  });
 }
 
-/// Where each recording's slew limit drive starts, one recording at a time, by the fit-segment cost at z: at
-/// the analysis's start, or where the actuator rests (Problem::set_drive_at_rest). A closed loop from a
-/// charged start commands at once what the drive reaches only by slewing there (fresh seed 211's case021);
-/// a recording that starts mid-motion finds the drive at its commands (seed 131's case035). Leaves it set in
-/// `problem`; returns whether it changed.
+/// Where each recording's slew limit drive starts, by choose_start_states: at the analysis's start, or where
+/// the actuator rests (Problem::set_drive_at_rest). A closed loop from a charged start commands at once what
+/// the drive reaches only by slewing there (fresh seed 211's case021); a recording that starts mid-motion
+/// finds the drive at its commands (seed 131's case035).
 bool choose_drive_at_rest(Problem& problem, const FitSpace& space, const Eigen::VectorXd& z, size_t recordings) {
-  const auto e = space.effects(z);
-  const Nominal k = space.g_scale(z);
-  std::vector<char> at_rest = problem.drive_at_rest();
-  at_rest.resize(recordings, 0);
-  const auto before = at_rest;
-  for (size_t r = 0; r < recordings; ++r) {
-    std::array<double, 2> cost{};
-    for (size_t choice : {0U, 1U}) {
-      at_rest[r] = static_cast<char>(choice);
-      problem.set_drive_at_rest(at_rest);
-      cost[choice] = problem.residual(e, k).squaredNorm();
-    }
-    at_rest[r] = static_cast<char>(cost[1] < cost[0]);
-  }
-  problem.set_drive_at_rest(at_rest);
-  return at_rest != before;
+  const auto set = [&](const std::vector<char>& at_rest) { problem.set_drive_at_rest(at_rest); };
+  return choose_start_states(problem, space, z, problem.drive_at_rest(), recordings, set,
+                             [](const auto& try_start, const auto&) {
+    for (char at_rest : {char{0}, char{1}}) try_start(at_rest);
+  });
 }
 
 }  // namespace

@@ -105,14 +105,19 @@ std::string drift_of_its_own_text(const DiagnosisResult& res, size_t recordings)
                 "each is a drift on its own.", recordings);
 }
 
+/// Whether the nuisance-only refit's residual exceeds the noise variance by at most a tenth of it.
+bool refit_within_a_tenth_of_the_noise(const DiagnosisResult& res) {
+  const double refit_um = res.nominal_refit.errors.rmse_um, sigma_um = res.noise_sigma_um;
+  return refit_um * refit_um <= 1.1 * sigma_um * sigma_um;
+}
+
 /// What an `unexplained` verdict whose nuisance-only refit itself comes within 10% of the noise variance
 /// means: the nominal model's own parameters account for its residual, and what is left is too small for any
 /// effect to beat that refit (fresh seed 211's case038: dynamics that depend on the bias, over one closed-loop
 /// recording about one operating point, where they are G's time constants scaled once; the refit leaves
 /// 0.0507 um against 0.0501 um of noise, and one window fails the `none` test). Empty otherwise.
 std::string refit_at_noise_text(const DiagnosisResult& res) {
-  const double refit_um = res.nominal_refit.errors.rmse_um, sigma_um = res.noise_sigma_um;
-  if (res.verdict != "unexplained" || !(refit_um * refit_um <= 1.1 * sigma_um * sigma_um)) return "";
+  if (res.verdict != "unexplained" || !refit_within_a_tenth_of_the_noise(res)) return "";
   const auto& k = res.nominal_refit;
   return format(" The nuisance-only refit alone comes within 10%% of the noise variance (gain %.3g, G's time scale "
                 "%.3g, f's shape %.3g): the nominal model's own parameters account for its residual, and what is left "
@@ -215,9 +220,7 @@ std::string explain_verdict(const DiagnosisResult& res, const Excess& excess, bo
 /// The level test passes and the residual is white, or its excess is under a tenth of the noise variance
 /// (a correlated residual that small is not a material effect).
 bool passes_none_test(const DiagnosisResult& res) {
-  const double sigma = res.noise_sigma_um;
-  const double refit_ms = res.nominal_refit.errors.rmse_um * res.nominal_refit.errors.rmse_um;
-  return res.none_test.level_ok && (res.none_test.white || refit_ms <= 1.1 * sigma * sigma);
+  return res.none_test.level_ok && (res.none_test.white || refit_within_a_tenth_of_the_noise(res));
 }
 
 /// The verdict `none` with the nuisance-only refit's prediction `y`; `why_not_delay` ends the text.
